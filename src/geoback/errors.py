@@ -1,0 +1,31 @@
+"""Errors that geoback explains to the user instead of crashing on."""
+from __future__ import annotations
+
+
+class GeobackError(Exception):
+    """Base of every error geoback answers with a message and exit code 2."""
+
+    exit_code = 2
+
+
+class CaseError(GeobackError):
+    """A mistake in a case file, located by file, line, column and field path."""
+
+    def __init__(self, message: str, file: str | None = None, line: int | None = None,
+                 column: int | None = None, field: str | None = None):
+        self.file, self.line, self.column, self.field = file, line, column, field
+        self.reason = message
+        where = ""
+        if file:
+            where = str(file)
+            if line is not None:
+                where += f":{line}"
+                if column is not None:
+                    where += f":{column}"
+            where += ": "
+        what = f"{field}: " if field else ""
+        super().__init__(f"{where}{what}{message}")
+
+
+class IllPosed(GeobackError):
+    """The readings cannot determine what was asked of them."""

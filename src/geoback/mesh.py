@@ -1,0 +1,245 @@
+"""Meshing the half-model with gmsh (headless, deterministic, cached by a hash of its inputs)."""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .case import Case
+
+MESH_FORMAT = 3  # bump when the meshing procedure changes, to invalidate caches
+GROWTH = 0.25  # element size grows by this fraction of the distance from the tunnel
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """Triangles of the ground around the excavated tunnel.
+
+    nodes: (N, 2) coordinates; triangles: (ne, 3|6) node indices (gmsh order: vertices, then
+    mid-side nodes of edges 01, 12, 20); region: (ne,) layer index of each element;
+    tunnel_edges: (nf, 2|3) node indices of the excavated boundary (vertices, then mid-node).
+    """
+
+    nodes: np.ndarray
+    triangles: np.ndarray
+    region: np.ndarray
+    region_names: tuple[str, ...]
+    tunnel_edges: np.ndarray
+    key: str
+
+    @property
+    def order(self) -> int:
+        return 2 if self.triangles.shape[1] == 6 else 1
+
+
+def mesh_inputs(case: Case) -> dict:
+    """Everything the mesh depends on (and nothing else)."""
+    g, m = case.geometry, case.mesh
+    return {
+        "format": MESH_FORMAT,
+        "geometry": g.model_dump(),
+        "tops": [layer.top for layer in case.ground.layers],
+        "names": [layer.name for layer in case.ground.layers],
+        "size_tunnel": m.size_tunnel or g.radius / 8,
+        "size_far": m.size_far or max(g.width, g.depth) / 12,
+        "size_instruments": m.size_instruments,
+        "instrument_points": instrument_refinement_points(case) if m.size_instruments else [],
+        "order": m.order,
+    }
+
+
+def instrument_refinement_points(case: Case) -> list[list[float]]:
+    """Sample points along every instrument, where the mesh is refined if asked."""
+    pts: list[list[float]] = []
+    for ins in case.instruments:
+        kind = ins.kind
+        if kind == "points":
+            pts += [list(p) for p in ins.points]
+        elif kind == "convergence":
+            pts += [list(p) for p in ins.points]
+        elif kind == "inclinometer":
+            for d in np.linspace(ins.head_depth, ins.toe_depth, 25):
+                pts.append([ins.x, -float(d)])
+        else:
+            a, b = np.array(ins.start), np.array(ins.end)
+            for s in np.linspace(0, 1, 25):
+                pts.append(list(map(float, a + s * (b - a))))
+    return pts
+
+
+def cache_dir() -> Path:
+    root = os.environ.get("GEOBACK_CACHE")
+    return Path(root) if root else Path.home() / ".cache" / "geoback"
+
+
+def mesh_key(inputs: dict) -> str:
+    import gmsh
+
+    text = json.dumps(inputs, sort_keys=True) + gmsh.__version__
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+GMSH_CALLS = 0  # counts real gmsh runs (tests check that the cache avoids them)
+
+
+def build_mesh(case: Case, use_cache: bool = True) -> Mesh:
+    """Mesh of the case, from the on-disk cache when the same inputs were meshed before."""
+    inputs = mesh_inputs(case)
+    key = mesh_key(inputs)
+    path = cache_dir() / "meshes" / f"{key}.npz"
+    if use_cache and path.exists():
+        try:
+            with np.load(path) as z:
+                return Mesh(z["nodes"], z["triangles"], z["region"], tuple(z["region_names"].tolist()),
+                            z["tunnel_edges"], key)
+        except (OSError, KeyError, ValueError):
+            pass  # a damaged cache entry is rebuilt
+    mesh = _run_gmsh(inputs, key)
+    if use_cache:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
+        os.close(fd)
+        np.savez(tmp, nodes=mesh.nodes, triangles=mesh.triangles, region=mesh.region,
+                 region_names=np.array(mesh.region_names), tunnel_edges=mesh.tunnel_edges)
+        os.replace(tmp, path)
+    return mesh
+
+
+def _run_gmsh(inputs: dict, key: str) -> Mesh:
+    import gmsh
+
+    global GMSH_CALLS
+    GMSH_CALLS += 1
+    g = inputs["geometry"]
+    W, H, R, d = g["width"], g["depth"], g["radius"], g["axis_depth"]
+    tops = list(inputs["tops"]) + [H]
+    gmsh.initialize(readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.option.setNumber("Mesh.RandomSeed", 1)
+        gmsh.model.add(key)
+        occ = gmsh.model.occ
+        rects = [occ.addRectangle(0, -tops[i + 1], 0, W, tops[i + 1] - tops[i]) for i in range(len(tops) - 1)]
+        disk = occ.addDisk(0, -d, 0, R, R)
+        pieces, _ = occ.cut([(2, r) for r in rects], [(2, disk)])
+        occ.fragment(pieces, [])
+        occ.synchronize()
+
+        # which layer each surface belongs to: its centre of mass depth
+        surfaces = sorted(tag for _, tag in gmsh.model.getEntities(2))
+        layer_of = {}
+        for tag in surfaces:
+            cy = occ.getCenterOfMass(2, tag)[1]
+            layer_of[tag] = max(i for i in range(len(tops) - 1) if tops[i] <= -cy)
+        tunnel = [tag for _, tag in gmsh.model.getEntities(1) if gmsh.model.getType(1, tag) != "Line"]
+        for i in range(len(tops) - 1):
+            tags = [t for t in surfaces if layer_of[t] == i]
+            if tags:
+                gmsh.model.addPhysicalGroup(2, tags, tag=i + 1, name=inputs["names"][i])
+        gmsh.model.addPhysicalGroup(1, tunnel, tag=100, name="tunnel")
+
+        fields = gmsh.model.mesh.field
+        fields.add("Distance", 1)
+        fields.setNumbers(1, "CurvesList", tunnel)
+        fields.setNumber(1, "Sampling", 200)
+        fields.add("Threshold", 2)
+        fields.setNumber(2, "InField", 1)
+        fields.setNumber(2, "SizeMin", inputs["size_tunnel"])
+        fields.setNumber(2, "SizeMax", inputs["size_far"])
+        # element size grows linearly away from the wall (graded mesh, ~log(domain/R) elements)
+        fields.setNumber(2, "DistMin", 0.0)
+        fields.setNumber(2, "DistMax", (inputs["size_far"] - inputs["size_tunnel"]) / GROWTH)
+        background = [2]
+        if inputs["instrument_points"]:
+            pts = [occ.addPoint(x, y, 0) for x, y in inputs["instrument_points"]]
+            occ.synchronize()
+            fields.add("Distance", 3)
+            fields.setNumbers(3, "PointsList", pts)
+            fields.add("Threshold", 4)
+            fields.setNumber(4, "InField", 3)
+            fields.setNumber(4, "SizeMin", inputs["size_instruments"])
+            fields.setNumber(4, "SizeMax", inputs["size_far"])
+            fields.setNumber(4, "DistMin", inputs["size_instruments"])
+            fields.setNumber(4, "DistMax", inputs["size_instruments"] + (inputs["size_far"] - inputs["size_instruments"]) / GROWTH)
+            background.append(4)
+        fields.add("Min", 10)
+        fields.setNumbers(10, "FieldsList", background)
+        fields.setAsBackgroundMesh(10)
+        for opt, val in (("Mesh.MeshSizeExtendFromBoundary", 0), ("Mesh.MeshSizeFromPoints", 0),
+                         ("Mesh.MeshSizeFromCurvature", 0), ("Mesh.Algorithm", 6),
+                         ("Mesh.ElementOrder", inputs["order"]), ("Mesh.SecondOrderLinear", 0),
+                         ("Mesh.HighOrderOptimize", 0)):
+            gmsh.option.setNumber(opt, val)
+        gmsh.model.mesh.generate(2)
+
+        node_tags, coords, _ = gmsh.model.mesh.getNodes()
+        index = np.empty(int(node_tags.max()) + 1, dtype=np.int64)
+        index[node_tags.astype(np.int64)] = np.arange(len(node_tags))
+        nodes = coords.reshape(-1, 3)[:, :2].copy()
+        tri_type = 9 if inputs["order"] == 2 else 2
+        line_type = 8 if inputs["order"] == 2 else 1
+        npe = 6 if inputs["order"] == 2 else 3
+        tris, region = [], []
+        for i in range(len(tops) - 1):
+            tags = [t for t in surfaces if layer_of[t] == i]
+            for t in tags:
+                _, enodes = gmsh.model.mesh.getElementsByType(tri_type, t)
+                tris.append(index[enodes.astype(np.int64)].reshape(-1, npe))
+                region.append(np.full(len(tris[-1]), i, dtype=np.int32))
+        edges = []
+        for t in tunnel:
+            _, enodes = gmsh.model.mesh.getElementsByType(line_type, t)
+            edges.append(index[enodes.astype(np.int64)].reshape(-1, 3 if npe == 6 else 2))
+    finally:
+        gmsh.finalize()
+    triangles = np.vstack(tris)
+    region_arr = np.concatenate(region)
+    # drop nodes gmsh keeps for geometry points that no element uses, renumber compactly
+    used = np.zeros(len(nodes), bool)
+    used[triangles.ravel()] = True
+    renum = np.cumsum(used) - 1
+    nodes = nodes[used]
+    triangles = renum[triangles]
+    tunnel_edges = renum[np.vstack(edges)]
+    # counter-clockwise orientation for every triangle
+    p = nodes[triangles[:, :3]]
+    area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
+    flip = area2 < 0
+    if flip.any():
+        t = triangles[flip]
+        t = t[:, [0, 2, 1, 5, 4, 3]] if npe == 6 else t[:, [0, 2, 1]]
+        triangles[flip] = t
+    return Mesh(nodes, triangles.astype(np.int64), region_arr, tuple(inputs["names"]),
+                tunnel_edges.astype(np.int64), key)
+
+
+def write_mesh(mesh: Mesh, path: Path, point_data: dict | None = None, cell_data: dict | None = None) -> None:
+    """Write the mesh (and optional fields) with meshio; format from the suffix (.msh, .vtu)."""
+    import meshio
+
+    cell_type = "triangle6" if mesh.order == 2 else "triangle"
+    cells = [(cell_type, mesh.triangles)]
+    cdata = {"region": [mesh.region.astype(np.int32)]}
+    for k, v in (cell_data or {}).items():
+        cdata[k] = [v]
+    m = meshio.Mesh(np.column_stack([mesh.nodes, np.zeros(len(mesh.nodes))]), cells,
+                    point_data=point_data or {}, cell_data=cdata)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=path.suffix)
+    os.close(fd)
+    try:
+        if path.suffix == ".msh":
+            meshio.write(tmp, m, file_format="gmsh22", binary=False)
+        else:
+            meshio.write(tmp, m)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
