@@ -183,6 +183,8 @@ class FitSettings(Strict):
     mu0: Positive = 10.0
     step_tol: Positive = 1e-6
     objective_tol: Positive = 1e-10
+    weighting: Literal["full", "diagonal", "identity"] = Field(
+        "full", description="C_x used in J: the instruments' full covariance (eqn 9), its diagonal, or I (eqn 8)")
 
 
 class Output(Strict):

@@ -1,0 +1,169 @@
+"""Command line: a thin layer that parses, calls the library and prints."""
+from __future__ import annotations
+
+import json
+import os
+import sys
+from functools import wraps
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from .errors import GeobackError
+
+app = typer.Typer(add_completion=False, pretty_exceptions_enable=False, no_args_is_help=True,
+                  help="Maximum-likelihood back-analysis of tunnel and excavation instrumentation.")
+
+
+def _err(message: str) -> None:
+    typer.echo(f"error: {message}", err=True)
+
+
+def friendly(func):
+    """Answer user mistakes with one clear line and exit code 2, never a traceback."""
+
+    @wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except GeobackError as exc:
+            _err(str(exc))
+            raise typer.Exit(exc.exit_code) from None
+        except (ValueError, OSError) as exc:
+            if os.environ.get("GEOBACK_DEBUG"):
+                raise
+            _err(str(exc))
+            raise typer.Exit(2) from None
+        except KeyboardInterrupt:
+            _err("interrupted; results already written are intact")
+            raise typer.Exit(130) from None
+
+    return wrapper
+
+
+def _load(case: Path):
+    from .case import load_case
+
+    return load_case(case)
+
+
+def _out_dir(loaded, out: Optional[Path]) -> Path:
+    if out is not None:
+        return out
+    if loaded.case.output.dir:
+        return loaded.folder / loaded.case.output.dir
+    return Path("results") / loaded.case.name
+
+
+@app.command()
+@friendly
+def validate(case: Path = typer.Argument(..., help="case file (YAML)")):
+    """Check a case file: schema, physics and instrument positions."""
+    from .problem import Problem
+
+    loaded = _load(case)
+    problem = Problem(loaded)
+    typer.echo(f"{case}: valid ({len(loaded.case.instruments)} instruments, {problem.obs.m} readings, "
+               f"{len(loaded.case.parameters)} parameters, {problem.fe.ndof} dofs)")
+
+
+@app.command()
+@friendly
+def schema():
+    """Print the JSON Schema of case files (for editors)."""
+    from .case import case_schema
+
+    typer.echo(json.dumps(case_schema(), indent=2))
+
+
+@app.command()
+@friendly
+def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
+         out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)")):
+    """Mesh the case with gmsh; write mesh.msh and mesh.vtu."""
+    from .mesh import build_mesh, write_mesh
+
+    loaded = _load(case)
+    m = build_mesh(loaded.case)
+    folder = _out_dir(loaded, out)
+    write_mesh(m, folder / "mesh.msh")
+    write_mesh(m, folder / "mesh.vtu")
+    typer.echo(f"{len(m.triangles)} elements, {len(m.nodes)} nodes ({2 * len(m.nodes)} dofs) -> {folder}/mesh.msh, mesh.vtu")
+
+
+@app.command()
+@friendly
+def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
+             out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
+             vtu: bool = typer.Option(True, help="write the displacement/stress field as field.vtu")):
+    """Forward run with the case's ground values: predicted readings and the field."""
+    from .problem import Problem
+    from .simulate import simulate as run_simulation
+
+    loaded = _load(case)
+    problem = Problem(loaded, parameters=[])
+    folder = _out_dir(loaded, out)
+    res = run_simulation(problem, folder, vtu=vtu and loaded.case.output.vtu)
+    typer.echo(f"{problem.obs.m} readings predicted on {res['dofs']} dofs -> {folder}/predicted.csv")
+
+
+@app.command()
+@friendly
+def covariance(case: Optional[Path] = typer.Argument(None, help="case file: print an instrument's C_x"),
+               name: Optional[str] = typer.Option(None, "--name", help="instrument name in the case"),
+               instrument: Optional[str] = typer.Option(None, help="inclinometer, sliding-micrometer (extensometer) or deflectometer"),
+               stations: Optional[int] = typer.Option(None, help="number of stations"),
+               spacing: Optional[float] = typer.Option(None, help="equal station spacing [m]"),
+               lengths: Optional[str] = typer.Option(None, help="station lengths l1,l2,... from the reference end [m]"),
+               sigma: Optional[float] = typer.Option(None, help="std of one primary reading"),
+               var_a: float = typer.Option(0.0, help="variance of A (sliding micrometer)"),
+               var_b: float = typer.Option(0.0, help="variance of B (inclinometer)"),
+               var_c: float = typer.Option(0.0, help="variance of C (deflectometer)"),
+               var_d: float = typer.Option(0.0, help="variance of D (deflectometer)"),
+               fmt: str = typer.Option("table", "--format", help="table, csv or json"),
+               header: bool = typer.Option(False, help="with --format csv: one header row of labels")):
+    """Print a measurement covariance matrix C_x (eqns 10-20), in station order from the reference end."""
+    from . import covariance as cov
+
+    if fmt not in ("table", "csv", "json"):
+        raise GeobackError(f"--format must be table, csv or json, not '{fmt}'")
+    if case is not None:
+        if not name:
+            raise GeobackError("give --name INSTRUMENT to choose an instrument of the case")
+        from .instruments import build_block
+
+        loaded = _load(case)
+        idx = next((i for i, ins in enumerate(loaded.case.instruments) if ins.name == name), None)
+        if idx is None:
+            raise GeobackError(f"{case}: no instrument named '{name}' "
+                               f"(instruments: {', '.join(i.name for i in loaded.case.instruments)})")
+        block = build_block(loaded.case.instruments[idx], loaded, idx)
+        labels = [f"{lab.component}{lab.station}" for lab in block.labels]
+        typer.echo(cov.render_matrix(block.covariance, fmt, header=header or fmt != "csv", labels=labels))
+        return
+    if instrument is None or sigma is None:
+        raise GeobackError("give a case file with --name, or --instrument KIND with --sigma and the stations")
+    kind = cov.normalise_kind(instrument)
+    ls = None
+    if lengths is not None:
+        try:
+            ls = [float(v) for v in lengths.split(",") if v.strip()]
+        except ValueError:
+            raise GeobackError(f"--lengths must be numbers separated by commas, found '{lengths}'") from None
+        if stations is not None and stations != len(ls):
+            raise GeobackError(f"--stations {stations} but --lengths gives {len(ls)} lengths")
+        stations = None
+    ls = cov.station_lengths(stations=stations, spacing=spacing, lengths=ls)
+    variances = {"sliding_micrometer": {"A": var_a}, "inclinometer": {"B": var_b},
+                 "deflectometer": {"C": var_c, "D": var_d}}[kind]
+    C = cov.instrument_covariance(kind, ls, sigma, variances)
+    typer.echo(cov.render_matrix(C, fmt, header=header or fmt != "csv"))
+
+
+def main() -> None:  # pragma: no cover
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
