@@ -110,6 +110,43 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
 
 @app.command()
 @friendly
+def run(case: Path = typer.Argument(..., help="case file (YAML)"),
+        out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
+        method: Optional[str] = typer.Option(None, help="lm, lm-scaled or gn (default: the case's fit.method)"),
+        plots: bool = typer.Option(False, "--plots", help="also write figures (PNG and SVG)"),
+        quiet: bool = typer.Option(False, "--quiet", "-q", help="print only the final line"),
+        as_json: bool = typer.Option(False, "--json", help="print summary.json to stdout")):
+    """Identify the case's parameters by maximum likelihood and write all results."""
+    from .identify import run_case
+    from .report import report_text, summary
+
+    if method is not None and method not in ("lm", "lm-scaled", "gn"):
+        raise GeobackError(f"--method must be lm, lm-scaled or gn, not '{method}'")
+    loaded = _load(case)
+    folder = _out_dir(loaded, out)
+    names = [p.name for p in loaded.case.parameters]
+
+    def progress(it):
+        if not quiet and not as_json:
+            vals = ", ".join(f"{n} = {v:.6g}" for n, v in zip(names, it.p))
+            typer.echo(f"  iteration {it.k:2d}  mu = {it.mu:8.2g}  J = {it.J:.6g}  "
+                       f"{'accepted' if it.accepted else 'rejected'}  {vals}", err=True)
+
+    res = run_case(loaded, folder, method=method, progress=progress, plots=plots)
+    if as_json:
+        typer.echo(json.dumps(json.loads((folder / "summary.json").read_text())))
+    elif not quiet:
+        typer.echo(report_text(res))
+    s = summary(res)
+    estimates = ", ".join(f"{n} = {v['estimate']:.6g} +/- {v['std']:.3g}" for n, v in s["parameters"].items())
+    typer.echo(f"{s['status']}: {estimates} ({s['iterations']} iterations, {s['factorisations']} "
+               f"factorisation(s)) -> {folder}", err=as_json)
+    if res.fit.status != "converged":
+        raise typer.Exit(1)
+
+
+@app.command()
+@friendly
 def covariance(case: Optional[Path] = typer.Argument(None, help="case file: print an instrument's C_x"),
                name: Optional[str] = typer.Option(None, "--name", help="instrument name in the case"),
                instrument: Optional[str] = typer.Option(None, help="inclinometer, sliding-micrometer (extensometer) or deflectometer"),

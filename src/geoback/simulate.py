@@ -66,3 +66,40 @@ def simulate(problem: Problem, out: Path, values: dict | None = None, vtu: bool 
     if vtu:
         write_field(problem, values, out / "field.vtu")
     return {"readings": x, "dofs": problem.fe.ndof}
+
+
+def refined_case(case, factor: float):
+    """The same case meshed `factor` times finer (for data that avoids the inverse crime)."""
+    from .mesh import mesh_inputs
+
+    sizes = mesh_inputs(case)
+    mesh = case.mesh.model_copy(update={
+        "size_tunnel": sizes["size_tunnel"] / factor,
+        "size_far": sizes["size_far"] / factor,
+        "size_instruments": (sizes["size_instruments"] / factor) if sizes["size_instruments"] else None,
+    })
+    return case.model_copy(update={"mesh": mesh})
+
+
+def synthetic_readings(loaded, refine: float = 2.0, values: dict | None = None,
+                       noise_seed: int | None = None, noise_scale: float = 1.0) -> dict[str, np.ndarray]:
+    """Readings of every instrument from a finer mesh, optionally with noise drawn from C_x.
+
+    `values` overrides named quantities (e.g. {'Egrad[clay]': 500}); noise is L z with
+    C_x = L L^t per instrument (eqn 10), seeded.
+    """
+    from .case import LoadedCase
+
+    fine = LoadedCase(refined_case(loaded.case, refine), loaded.path, loaded.marks)
+    problem = Problem(fine, parameters=[], extra_values=values)
+    x = problem.obs.P @ problem.displacement(problem.values)
+    rng = np.random.default_rng(noise_seed) if noise_seed is not None else None
+    out, offset = {}, 0
+    for block in problem.obs.blocks:
+        m = len(block.labels)
+        xi = x[offset:offset + m].copy()
+        if rng is not None:
+            xi += noise_scale * (np.linalg.cholesky(block.covariance) @ rng.standard_normal(m))
+        out[block.name] = xi
+        offset += m
+    return out

@@ -1,0 +1,106 @@
+"""Reliability of the estimate (eqns 43-55, whitened as in ERRATA.md).
+
+With C_x = L L^t and A' = L^-1 A: C_p = (A'^t A' + C_p0^-1)^-1 (eqn 55), Q = A' C_p A'^t
+(information density; symmetric, idempotent without priors, trace = n), the SVD A' = U S V^t
+(eqns 44-49) on relative parameter changes dp/p, chi^2 = J_min on m - n degrees of freedom,
+and -2 ln L (eqn 5) for AIC and BIC.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import special
+
+ILL_CONDITIONED = 1e-8  # smallest / largest singular value below which a combination is undetermined
+
+
+@dataclass
+class Reliability:
+    names: list[str]
+    p: np.ndarray
+    covariance: np.ndarray
+    std: np.ndarray
+    correlation: np.ndarray
+    singular_values: np.ndarray  # of A' diag(|p|): sensitivity to relative changes
+    directions: np.ndarray  # columns: parameter-space directions V (relative changes)
+    condition: float
+    information_density: np.ndarray  # Q (m x m)
+    leverage: np.ndarray  # diag Q
+    whitened_residual: np.ndarray
+    chi2: float
+    dof: int
+    p_value: float
+    minus2logL: float
+    aic: float
+    bic: float
+    undetermined: list[str]  # plain-words description of combinations the readings cannot fix
+
+    @property
+    def reduced_chi2(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else float("nan")
+
+    def interval95(self) -> tuple[np.ndarray, np.ndarray]:
+        z = special.ndtri(0.975)
+        return self.p - z * self.std, self.p + z * self.std
+
+
+def chi2_sf(x: float, dof: int) -> float:
+    """P(chi^2_dof > x) (scipy.special, to avoid importing scipy.stats at start-up)."""
+    return float(special.gammaincc(dof / 2, x / 2)) if dof > 0 else float("nan")
+
+
+def combination_text(names: list[str], v: np.ndarray) -> str:
+    """'dE[clay]/E[clay] - 0.71 dK0/K0' for a direction in relative parameter changes."""
+    v = v / v[np.argmax(np.abs(v))]
+    parts = []
+    for n, c in zip(names, v):
+        if abs(c) < 0.05:
+            continue
+        term = f"d{n}/{n}"
+        parts.append(("+ " if c > 0 else "- ") + (f"{abs(c):.2g} " if abs(abs(c) - 1) > 1e-3 else "") + term)
+    text = " ".join(parts)
+    return text[2:] if text.startswith("+ ") else text
+
+
+def assess(names: list[str], p: np.ndarray, A: np.ndarray, residual: np.ndarray, L: np.ndarray,
+           prior_precision: np.ndarray | None = None, J_prior: float = 0.0) -> Reliability:
+    """Everything eqns 43-55 say about the optimum p (A = dx/dp, residual = x* - x)."""
+    from scipy.linalg import solve_triangular
+
+    m, n = A.shape
+    Aw = solve_triangular(L, A, lower=True)
+    rw = solve_triangular(L, residual, lower=True)
+    prec = np.zeros(n) if prior_precision is None else np.asarray(prior_precision, float)
+    scale = np.where(np.abs(p) > 0, np.abs(p), 1.0)
+    As = Aw * scale  # sensitivity to relative changes dp/p
+    U, s, Vt = np.linalg.svd(As, full_matrices=False)
+    cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    undetermined = []
+    for i in range(len(s)):
+        if s[i] <= ILL_CONDITIONED * s[0] and prec[np.argmax(np.abs(Vt[i]))] == 0:
+            undetermined.append(combination_text(names, Vt[i]))
+    # C_p in relative coordinates: (As^t As + diag(prec * scale^2))^-1, via the SVD when no prior
+    Ns = As.T @ As + np.diag(prec * scale ** 2)
+    w, V = np.linalg.eigh(Ns)
+    tiny = w <= ILL_CONDITIONED ** 2 * max(w.max(), 1e-300)
+    winv = np.where(tiny, np.inf, 1.0 / np.where(tiny, 1.0, w))
+    with np.errstate(invalid="ignore"):
+        Cs = (V * np.where(np.isinf(winv), 0.0, winv)) @ V.T
+    Cp = Cs * np.outer(scale, scale)
+    std = np.sqrt(np.clip(np.diag(Cp), 0, None))
+    if tiny.any():  # undetermined combinations: their members' std is unbounded
+        involved = np.abs(V[:, tiny]).max(axis=1) > 0.05
+        std = np.where(involved, np.inf, std)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = Cp / np.outer(std, std)
+    corr[~np.isfinite(corr)] = np.nan
+    np.fill_diagonal(corr, 1.0)
+    Q = As @ Cs @ As.T
+    chi2 = float(rw @ rw)
+    dof = m - n + int(np.count_nonzero(prec))
+    pval = chi2_sf(chi2, dof)
+    logdet = 2 * float(np.sum(np.log(np.abs(np.diag(L)))))
+    m2logL = chi2 + J_prior + logdet + m * np.log(2 * np.pi)
+    return Reliability(list(names), p, Cp, std, corr, s, Vt.T, cond, Q, np.diag(Q).copy(), rw, chi2, dof, pval,
+                       float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined)
