@@ -76,21 +76,17 @@ def assess(names: list[str], p: np.ndarray, A: np.ndarray, residual: np.ndarray,
     As = Aw * scale  # sensitivity to relative changes dp/p
     U, s, Vt = np.linalg.svd(As, full_matrices=False)
     cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
-    undetermined = []
-    for i in range(len(s)):
-        if s[i] <= ILL_CONDITIONED * s[0] and prec[np.argmax(np.abs(Vt[i]))] == 0:
-            undetermined.append(combination_text(names, Vt[i]))
-    # C_p in relative coordinates: (As^t As + diag(prec * scale^2))^-1, via the SVD when no prior
-    Ns = As.T @ As + np.diag(prec * scale ** 2)
-    w, V = np.linalg.eigh(Ns)
-    tiny = w <= ILL_CONDITIONED ** 2 * max(w.max(), 1e-300)
-    winv = np.where(tiny, np.inf, 1.0 / np.where(tiny, 1.0, w))
-    with np.errstate(invalid="ignore"):
-        Cs = (V * np.where(np.isinf(winv), 0.0, winv)) @ V.T
+    # the prior adds rows sqrt(C_p0^-1) to the (relative) sensitivity: C_p = (A'^t A' + C_p0^-1)^-1
+    aug = np.vstack([As, np.diag(np.sqrt(prec) * scale)])
+    _, sa, Vta = np.linalg.svd(aug, full_matrices=False)
+    tiny = sa <= ILL_CONDITIONED * sa[0]
+    undetermined = [combination_text(names, Vta[i]) for i in np.flatnonzero(tiny)]
+    inv2 = np.where(tiny, 0.0, 1.0 / np.where(tiny, 1.0, sa) ** 2)
+    Cs = (Vta.T * inv2) @ Vta
     Cp = Cs * np.outer(scale, scale)
     std = np.sqrt(np.clip(np.diag(Cp), 0, None))
     if tiny.any():  # undetermined combinations: their members' std is unbounded
-        involved = np.abs(V[:, tiny]).max(axis=1) > 0.05
+        involved = np.abs(Vta[tiny]).max(axis=0) > 0.05
         std = np.where(involved, np.inf, std)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = Cp / np.outer(std, std)

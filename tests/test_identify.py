@@ -1,0 +1,125 @@
+"""Identification of the paper's synthetic example (eqns 27-55) and the reliability measures."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from geoback.case import LoadedCase, case_from_data, load_case
+from geoback.estimate import fit
+from geoback.identify import identify, run_case
+from geoback.problem import Problem
+
+
+@pytest.fixture(scope="module")
+def paper_problem():
+    from conftest import CASES
+
+    return Problem(load_case(CASES / "tunnel-paper.yaml"))
+
+
+@pytest.mark.parametrize("method", ["gn", "lm", "lm-scaled"])
+@pytest.mark.parametrize("weighting", ["identity", "full"])
+def test_paper_example_reaches_truth(paper_problem, method, weighting):
+    """From E = 5 MPa, K0 = 0.5 to E = 10 MPa, K0 = 1 (readings from a 2x finer mesh, no noise)."""
+    before = paper_problem.counters.factorisations
+    res = fit(paper_problem, method=method, weighting=weighting)
+    E, K0 = res.p
+    assert res.status == "converged", res.reason
+    assert abs(E / 10000 - 1) < 0.005
+    assert abs(K0 - 1) < 0.005
+    assert res.iterations <= 8
+    assert res.history[0].p[0] == 5000 and res.history[0].p[1] == 0.5
+    # K = E k: the factorisation of k made for the first fit serves every later one (eqns 41-42)
+    assert paper_problem.counters.factorisations == max(before, 1)
+
+
+def test_run_writes_outputs_with_one_factorisation(paper_case_path, tmp_path):
+    res = run_case(load_case(paper_case_path), tmp_path)
+    for name in ("parameters.csv", "covariance.csv", "correlation.csv", "eigen.csv", "information_density.csv",
+                 "readings.csv", "iterations.csv", "summary.json", "report.md", "field.vtu"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["factorisations"] == 1
+    assert summary["status"] == "converged"
+    assert summary["solves"] >= summary["iterations"]
+    assert abs(summary["parameters"]["E[clay]"]["estimate"] / 10000 - 1) < 0.005
+    rows = (tmp_path / "readings.csv").read_text().splitlines()
+    assert len(rows) == 1 + res.problem.obs.m
+
+
+def test_information_density_is_a_projector(paper_problem):
+    res = identify(paper_problem.loaded, problem=paper_problem)
+    Q = res.reliability.information_density
+    n = paper_problem.params.n
+    assert np.allclose(Q, Q.T, atol=1e-12)
+    assert np.allclose(Q @ Q, Q, atol=1e-10)
+    assert np.trace(Q) == pytest.approx(n, rel=1e-10)
+    assert np.all(res.reliability.leverage >= -1e-12) and np.all(res.reliability.leverage <= 1 + 1e-12)
+
+
+def test_covariance_is_inverse_fisher_and_scales_with_sigma(paper_problem):
+    """C_p = (A'^t A')^-1 (eqn 55): check against a direct computation, and C_p ∝ sigma^2."""
+    res = identify(paper_problem.loaded, problem=paper_problem)
+    A = res.fit.A
+    C = res.objective.C
+    direct = np.linalg.inv(A.T @ np.linalg.solve(C, A))
+    assert np.allclose(res.reliability.covariance, direct, rtol=1e-8)
+    from geoback.reliability import assess
+
+    L = res.objective.L
+    r = res.objective.measured - res.fit.x
+    doubled = assess(paper_problem.params.names, res.fit.p, A, 2 * r, 2 * L)
+    assert np.allclose(doubled.std, 2 * res.reliability.std, rtol=1e-10)
+
+
+def _paper_dict(paper_case_path):
+    import yaml
+
+    return yaml.safe_load(paper_case_path.read_text())
+
+
+def test_prior_enters_covariance(paper_case_path):
+    data = _paper_dict(paper_case_path)
+    data["parameters"][1]["prior"] = {"mean": 1.0, "std": 0.01}
+    problem = Problem(LoadedCase(case_from_data(data), paper_case_path, {}))
+    res = identify(problem.loaded, problem=problem)
+    A, C = res.fit.A, problem.obs.covariance
+    info = A.T @ np.linalg.solve(C, A) + np.diag([0.0, 1 / 0.01 ** 2])
+    assert np.allclose(res.reliability.covariance, np.linalg.inv(info), rtol=1e-8)
+    assert res.reliability.std[1] < 0.01
+    assert res.reliability.dof == problem.obs.m - 2 + 1
+
+
+def test_log_transform_reaches_same_optimum(paper_case_path, paper_problem):
+    data = _paper_dict(paper_case_path)
+    for p in data["parameters"]:
+        p["log"] = True
+    problem = Problem(LoadedCase(case_from_data(data), paper_case_path, {}))
+    a = fit(problem, method="lm")
+    b = fit(paper_problem, method="lm")
+    assert np.allclose(a.p, b.p, rtol=1e-5)
+
+
+def test_undetermined_combination_is_named(paper_case_path):
+    """Unlined tunnel: the stress-release fraction beta only rescales E (x ∝ beta / E)."""
+    data = _paper_dict(paper_case_path)
+    data["parameters"] = [{"name": "E", "initial": 8000}, {"name": "beta", "initial": 0.8},
+                          {"name": "K0", "initial": 0.8}]
+    problem = Problem(LoadedCase(case_from_data(data), paper_case_path, {}))
+    res = identify(problem.loaded, problem=problem)
+    rel = res.reliability
+    assert rel.undetermined, "E and beta should be reported as not separately determined"
+    text = rel.undetermined[0]
+    assert "E[clay]" in text and "beta" in text
+    assert np.isinf(rel.std[0]) and np.isinf(rel.std[1])
+    assert np.isfinite(rel.std[2])
+
+
+def test_cli_run_prints_report_and_exits_zero(paper_case_path, tmp_path):
+    out = subprocess.run([sys.executable, "-m", "geoback.cli", "run", str(paper_case_path), "--out", str(tmp_path)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "E[clay]" in out.stdout and "converged" in out.stdout
+    assert "Traceback" not in out.stderr
