@@ -63,7 +63,9 @@ class Objective:
         self.C = C
         self.L = np.linalg.cholesky(C) if weighting == "full" else np.diag(np.sqrt(np.diag(C)))
         self.params = problem.params
-        self.scale = np.where(self.params.log, 1.0, np.maximum(np.abs(self.params.initial), 1e-12))
+        span = np.where(np.isfinite(self.params.upper - self.params.lower), (self.params.upper - self.params.lower) / 10, 1.0)
+        typical = np.where(self.params.initial != 0, np.abs(self.params.initial), span)
+        self.scale = np.where(self.params.log, 1.0, typical)  # q / scale is O(1) for every parameter
 
     def whiten(self, v: np.ndarray) -> np.ndarray:
         from scipy.linalg import solve_triangular

@@ -20,6 +20,7 @@ from .case import Case
 #   K0grad        change of K0 per metre of depth below the tunnel axis [1/m]
 #   beta          fraction of the initial stress released by the excavation [-]
 #   n[layer]      cross-anisotropy E_h / E_v [-];  m[layer]: G_vh / (E_v / (2 (1 + nu))) [-]
+#   Esplit[layer] modulus below depth zsplit[layer] inside the layer (an unmodelled boundary) [kPa]
 EXTENSIONS = {"Egrad": 0.0, "K0grad": 0.0, "beta": 1.0, "n": 1.0, "m": 1.0}
 
 
@@ -87,7 +88,7 @@ class Ground:
         """Full name of a quantity ('E' -> 'E[clay]' for a single layer); None if unknown."""
         base, _, rest = name.partition("[")
         layer = rest.rstrip("]") if rest else None
-        per_layer = {"E", "nu", "Egrad", "n", "m"}
+        per_layer = {"E", "nu", "Egrad", "n", "m", "Esplit", "zsplit"}
         if base in per_layer:
             if layer is None:
                 if len(self.layers) != 1:
@@ -116,6 +117,9 @@ class Ground:
         for i, name in enumerate(self.layers):
             sel = self.element_region == i
             E = values[f"E[{name}]"] + values.get(f"Egrad[{name}]", 0.0) * (self.element_depth[sel] - self.tops[i])
+            if f"zsplit[{name}]" in values:
+                below = self.element_depth[sel] > values[f"zsplit[{name}]"]
+                E = np.where(below, values.get(f"Esplit[{name}]", values[f"E[{name}]"]), E)
             nu = values[f"nu[{name}]"]
             n, m = values.get(f"n[{name}]", 1.0), values.get(f"m[{name}]", 1.0)
             if n == 1.0 and m == 1.0 and not isinstance(n, complex) and not isinstance(m, complex):

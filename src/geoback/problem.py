@@ -6,6 +6,7 @@ sensitivity column is a back-substitution du/dp = K^-1 (df/dp - dK/dp u) (eqn 34
 """
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field
 
@@ -52,15 +53,36 @@ class Problem:
         self.values.update(extra_values or {})
         self.backend = backend
         self.counters = Counters()
-        self._factor: tuple[np.ndarray, Factorisation] | None = None
-        self.params = self._parameters(parameters if parameters is not None else case.parameters)
+        self._cache: dict = {"factor": None}  # shared with derived problems (same mesh)
+        self.obs: Observations | None = None
+        self._set_parameters(parameters if parameters is not None else case.parameters)
+        self.timings["observations"] = time.perf_counter() - t2
+
+    def _set_parameters(self, specs) -> None:
+        self.params = self._parameters(specs)
         consts = {n for n in self.params.names if n.split("[")[0] in ("A", "B", "C", "D")}
-        self.obs: Observations = build_observations(loaded, self.fe, consts)
+        if self.obs is None or set(self.obs.identified_constants) != consts:
+            measured = self.obs.measured if self.obs is not None else None
+            self.obs = build_observations(self.loaded, self.fe, consts)
+            if measured is not None:  # readings set in memory (studies, diagnose) carry over
+                self.obs.measured = measured
         unknown = [n for n in consts if n not in self.obs.constant_names]
         if unknown:
             raise self._param_error(unknown[0], "no linewise instrument has this integration constant")
         self._const_index = [self.obs.constant_names.index(n) if n in consts else -1 for n in self.params.names]
-        self.timings["observations"] = time.perf_counter() - t2
+
+    def derive(self, parameters, extra_values: dict | None = None) -> "Problem":
+        """The same mesh, FE model, readings and factorisation cache with other parameters/values
+        (how `diagnose` adds a hypothesis to the baseline model)."""
+        new = copy.copy(self)
+        new.values = dict(self.values)
+        new.values.update(extra_values or {})
+        new._set_parameters(parameters)
+        return new
+
+    @property
+    def _factor(self):
+        return self._cache["factor"]
 
     # ------------------------------------------------------------------ parameters
     def _param_error(self, name: str, why: str) -> CaseError:
@@ -84,9 +106,12 @@ class Problem:
                 if name not in self.values:
                     if base in EXTENSIONS:
                         self.values[name] = EXTENSIONS[base]
+                    elif base == "Esplit":
+                        self.values[name] = self.values["E" + name[len("Esplit"):]]
                     else:
                         raise self.loaded.error(("parameters", i, "name"),
-                                                f"'{p.name}' is not set in the case (give the layer a K0 first)")
+                                                f"'{p.name}' has no value in the case to start from"
+                                                + (" (give this layer a K0 in ground.layers)" if base == "K0" else ""))
             names.append(name)
             init.append(p.initial)
             lo.append(p.bounds[0] if p.bounds else -np.inf)
@@ -112,7 +137,8 @@ class Problem:
             s = float(np.vdot(ref, coeffs) / np.vdot(ref, ref))
             if s > 0 and np.linalg.norm(coeffs - s * ref) <= 1e-13 * np.linalg.norm(coeffs):
                 return fact, s
-            fact.release()
+            if fact.backend == "pardiso":
+                fact.release()
         t0 = time.perf_counter()
         K = self.fe.matrix(coeffs)
         t1 = time.perf_counter()
@@ -120,7 +146,7 @@ class Problem:
         self.counters.factorisations += 1
         self.counters.seconds_assembling += t1 - t0
         self.counters.seconds_factorising += time.perf_counter() - t1
-        self._factor = (coeffs.copy(), fact)
+        self._cache["factor"] = (coeffs.copy(), fact)
         return fact, 1.0
 
     def _solve(self, fact: Factorisation, s: float, rhs: np.ndarray) -> np.ndarray:

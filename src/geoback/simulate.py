@@ -91,8 +91,14 @@ def synthetic_readings(loaded, refine: float = 2.0, values: dict | None = None,
     from .case import LoadedCase
 
     fine = LoadedCase(refined_case(loaded.case, refine), loaded.path, loaded.marks)
+    values = dict(values or {})
+    constants = {k: values.pop(k) for k in list(values) if k.split("[")[0] in ("A", "B", "C", "D")}
     problem = Problem(fine, parameters=[], extra_values=values)
     x = problem.obs.P @ problem.displacement(problem.values)
+    for name, c in constants.items():  # a reference end that moved: readings = P u - G c (eqns 11, 15, 18)
+        if name not in problem.obs.constant_names:
+            raise ValueError(f"no linewise instrument has the integration constant '{name}'")
+        x = x - problem.obs.G[:, problem.obs.constant_names.index(name)] * c
     rng = np.random.default_rng(noise_seed) if noise_seed is not None else None
     out, offset = {}, 0
     for block in problem.obs.blocks:

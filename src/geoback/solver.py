@@ -24,12 +24,18 @@ def available_backends() -> list[str]:
     return names
 
 
-def default_backend() -> str:
+SMALL = 20000  # below this many unknowns SuperLU is as fast as PARDISO and has no threading overhead
+
+
+def default_backend(n: int | None = None) -> str:
+    """GEOBACK_SOLVER if set; else PARDISO for large systems, SuperLU for small ones."""
     wanted = os.environ.get("GEOBACK_SOLVER")
     if wanted:
         if wanted not in available_backends():
             raise ValueError(f"GEOBACK_SOLVER={wanted} is not available here ({', '.join(available_backends())})")
         return wanted
+    if n is not None and n < SMALL:
+        return "scipy"
     return available_backends()[0]
 
 
@@ -37,8 +43,8 @@ class Factorisation:
     """Factor of one SPD matrix (given as upper CSR); solve() is a back-substitution."""
 
     def __init__(self, upper: sp.csr_matrix, backend: str | None = None):
-        self.backend = backend or default_backend()
         self.n = upper.shape[0]
+        self.backend = backend or default_backend(self.n)
         if self.backend == "pardiso":
             import pypardiso
 

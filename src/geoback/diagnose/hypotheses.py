@@ -1,0 +1,101 @@
+"""The library of model extensions `diagnose` can propose: physics the baseline model may lack.
+
+Each hypothesis names its extra parameter(s) with the value that switches it off (the null
+value, where the extended model equals the baseline) and bounds, fixed extra values (e.g. the
+depth of a layer boundary), and a plain-words description. Their sensitivity columns are exact:
+the extensions stay linear-elastic and are differentiated like the baseline (eqns 34-40).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..case import Parameter
+
+
+@dataclass
+class Hypothesis:
+    key: str  # e.g. "stiffness-gradient[clay]"
+    kind: str  # one of KINDS
+    title: str  # short plain words
+    description: str  # one sentence on the physics
+    parameters: list[Parameter]  # extra parameters, initial = null value
+    extra_values: dict = field(default_factory=dict)  # fixed values the extension needs
+    group: str = ""  # hypotheses of one group (layer-boundary depths) are alternatives
+
+    @property
+    def names(self) -> list[str]:
+        return [p.name for p in self.parameters]
+
+
+KINDS = {
+    "stiffness-gradient": "modulus increasing linearly with depth",
+    "layer-boundary": "a layer boundary with a different modulus below it",
+    "anisotropy": "cross-anisotropic stiffness (horizontal modulus differs from vertical)",
+    "K0-gradient": "K0 varying with depth",
+    "integration-constant": "a linewise instrument's reference end moved (integration constant not zero)",
+    "stress-release": "only part of the initial stress released before support (beta < 1)",
+}
+
+
+def _param(name: str, initial: float, lo: float, hi: float) -> Parameter:
+    return Parameter(name=name, initial=initial, bounds=(lo, hi))
+
+
+def candidate_hypotheses(problem, p_hat: np.ndarray) -> list[Hypothesis]:
+    """Every extension that applies to this case, with null values taken at the baseline fit."""
+    case = problem.case
+    values = problem.values_for(p_hat)
+    out: list[Hypothesis] = []
+    tops = [layer.top for layer in case.ground.layers] + [case.geometry.depth]
+    baseline = set(problem.params.names)
+    R, zc = case.geometry.radius, case.geometry.axis_depth
+    for i, layer in enumerate(case.ground.layers):
+        name = layer.name
+        E = values[f"E[{name}]"]
+        thick = tops[i + 1] - tops[i]
+        if f"Egrad[{name}]" not in baseline:
+            g_max = 20 * E / max(thick, 1.0)
+            out.append(Hypothesis(
+                f"stiffness-gradient[{name}]", "stiffness-gradient", f"modulus of '{name}' increasing with depth",
+                f"E in layer '{name}' grows linearly with depth below its top (E = E_top + Egrad * (depth - top)).",
+                [_param(f"Egrad[{name}]", 0.0, -E / max(thick, 1.0) * 0.9, g_max)]))
+        if f"n[{name}]" not in baseline:
+            out.append(Hypothesis(
+                f"anisotropy[{name}]", "anisotropy", f"cross-anisotropic stiffness in '{name}'",
+                f"The horizontal modulus of '{name}' differs from the vertical one (E_h = n E_v; "
+                f"G_vh = E_v / (2 (1 + nu))).",
+                [_param(f"n[{name}]", 1.0, 0.2, 5.0)]))
+        # candidate boundary depths: within the layer, away from its edges, a grid of ~R/2
+        step = max(0.5, R / 2)
+        depths = np.arange(tops[i] + step, tops[i + 1] - step / 2, step)
+        for z in depths:
+            out.append(Hypothesis(
+                f"layer-boundary[{name}@{z:g}]", "layer-boundary",
+                f"a stiffer or softer stratum below {z:g} m in '{name}'",
+                f"Below {z:g} m depth the ground of '{name}' has another modulus (an unmodelled layer boundary).",
+                [_param(f"Esplit[{name}]", E, E / 20, E * 20)], {f"zsplit[{name}]": float(z)},
+                group=f"layer-boundary[{name}]"))
+    if "K0grad" not in baseline:
+        out.append(Hypothesis(
+            "K0-gradient", "K0-gradient", "K0 varying with depth",
+            f"K0 changes linearly with depth (K0 = K0_axis + K0grad * (depth - {zc:g} m)).",
+            [_param("K0grad", 0.0, -0.5, 0.5)]))
+    if "beta" not in baseline:
+        out.append(Hypothesis(
+            "stress-release", "stress-release", "partial stress release before support",
+            "Only a fraction beta of the initial stress on the tunnel wall was released by the excavation.",
+            [_param("beta", 1.0, 0.05, 1.5)]))
+    for block in problem.obs.blocks:
+        names = [n for n in block.constant_names if n not in baseline]
+        if not names:
+            continue
+        what = {"inclinometer": "toe (or head) moved", "sliding_micrometer": "anchor moved",
+                "extensometer": "anchor moved", "deflectometer": "reference end moved and rotated"}[block.kind]
+        out.append(Hypothesis(
+            f"integration-constant[{block.name}]", "integration-constant", f"{block.kind} {block.name}: {what}",
+            f"The reference end of {block.kind} '{block.name}' was assumed fixed but moved "
+            f"(integration constant{'s' if len(names) > 1 else ''} {', '.join(names)} of eqns 11/15/18).",
+            [_param(n, 0.0, -1.0, 1.0) for n in names]))
+    return out

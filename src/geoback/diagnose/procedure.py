@@ -1,0 +1,256 @@
+"""Model diagnosis: is the fit adequate, where is the mismatch, which missing physics explains it.
+
+1. Adequacy: chi^2 = J_min against chi^2(m - n) (the sigma's in the case are absolute).
+2. Location: each instrument's share of J; standardised residuals per reading, and for linewise
+   instruments per interval in primary-reading space (W^-1 r / sigma, eqns 11/15/18), scanned for
+   the run of same-signed residuals that stands out most.
+3. Ranking: the score (Lagrange-multiplier) statistic of every hypothesis at the baseline optimum,
+   S = ||P r'||^2 with P the projector on the part of the extension's whitened sensitivity that
+   the baseline parameters cannot mimic; S ~ chi^2(k) if the extension is absent. An extension
+   whose sensitivity lies in the baseline's span cannot be identified together with it: said so.
+4. Refit the most promising; likelihood-ratio test dJ ~ chi^2(k), AIC, BIC; accept the best
+   significant one (Bonferroni over the hypotheses refitted); look once more; stop when adequate
+   or nothing more is significant.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..case import Parameter
+from ..estimate import Fit, Objective, fit
+from ..reliability import Reliability, chi2_sf
+from ..identify import reliability_of
+from .hypotheses import Hypothesis, candidate_hypotheses
+
+COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mimic
+
+
+@dataclass
+class Mismatch:
+    instrument: str
+    kind: str
+    share: float  # of J
+    where: str  # plain words, e.g. "6-9 m depth"
+    size: float  # displacement mismatch over the stretch [m] (measured - computed)
+    sigmas: float  # its significance in standard deviations
+    text: str
+
+
+@dataclass
+class Scored:
+    hypothesis: Hypothesis
+    score: float
+    dof: int
+    p_score: float
+    collinear_with: str | None = None  # combination of baseline parameters it duplicates
+    refit: Fit | None = None
+    reliability: Reliability | None = None
+    J0: float = float("nan")
+    dJ: float = float("nan")
+    p_lr: float = float("nan")
+    aic: float = float("nan")
+    bic: float = float("nan")
+    problem: object = None
+
+
+@dataclass
+class Round:
+    chi2: float
+    dof: int
+    p_value: float
+    mismatches: list[Mismatch]
+    ranking: list[Scored]
+    accepted: Scored | None
+
+
+@dataclass
+class Diagnosis:
+    case: str
+    alpha: float
+    rounds: list[Round]
+    baseline_fit: Fit
+    baseline_reliability: Reliability
+    final_fit: Fit
+    final_reliability: Reliability
+    final_problem: object
+    baseline_problem: object
+    accepted: list[Scored] = field(default_factory=list)
+
+    @property
+    def adequate_before(self) -> bool:
+        return self.baseline_reliability.p_value >= self.alpha
+
+    @property
+    def adequate_after(self) -> bool:
+        return self.final_reliability.p_value >= self.alpha
+
+
+# ---------------------------------------------------------------------------------------------
+def _fit_and_assess(problem, method, weighting):
+    objective = Objective(problem, weighting)
+    res = fit(problem, method=method, weighting=weighting)
+    return res, reliability_of(problem, res, objective), objective
+
+
+def locate(problem, res: Fit, rel: Reliability) -> list[Mismatch]:
+    """Each instrument's share of J and its most significant stretch of misfit."""
+    out = []
+    r = problem.obs.measured - res.x
+    J = float(rel.whitened_residual @ rel.whitened_residual)
+    offset = 0
+    for block in problem.obs.blocks:
+        m = len(block.labels)
+        rw = rel.whitened_residual[offset:offset + m]
+        ri = r[offset:offset + m]
+        meas = problem.obs.measured[offset:offset + m]
+        share = float(rw @ rw) / J if J > 0 else 0.0
+        if block.integration is not None:
+            z = np.linalg.solve(block.integration, ri) / block.sigma  # standardised primary residuals
+        else:
+            z = ri / np.sqrt(np.diag(block.covariance))
+        i0, i1, stat = _strongest_run(z)
+        if block.integration is not None:
+            before = ri[i0 - 1] if i0 > 0 else 0.0
+            size = float(ri[i1] - before)
+            where = _stretch(block, i0, i1)
+            what = {"inclinometer": "horizontal displacement", "deflectometer": "normal displacement"}.get(
+                block.kind, "displacement along the line")
+        else:
+            size = float(ri[i0:i1 + 1].mean())
+            labs = block.labels[i0:i1 + 1]
+            where = (f"reading{'s' if i1 > i0 else ''} {i0 + 1}{'-' + str(i1 + 1) if i1 > i0 else ''} "
+                     f"({', '.join(sorted({lab.component for lab in labs}))})")
+            what = "displacement" if block.kind == "points" else "chord length change"
+        direction = "under-predicted" if np.sign(size) == np.sign(np.mean(meas[i0:i1 + 1])) else "over-predicted"
+        text = (f"{block.kind} {block.name}, {where}: {what} {direction} by {abs(size) * 1000:.2g} mm "
+                f"({abs(stat):.1f} σ); {100 * share:.0f} % of J")
+        out.append(Mismatch(block.name, block.kind, share, where, size, float(abs(stat)), text))
+        offset += m
+    return sorted(out, key=lambda mm: -mm.share)
+
+
+def _strongest_run(z: np.ndarray) -> tuple[int, int, float]:
+    """Contiguous stretch maximising |sum z| / sqrt(length)."""
+    best = (0, 0, 0.0)
+    c = np.concatenate([[0.0], np.cumsum(z)])
+    for i in range(len(z)):
+        for j in range(i, len(z)):
+            s = (c[j + 1] - c[i]) / np.sqrt(j - i + 1)
+            if abs(s) > abs(best[2]):
+                best = (i, j, float(s))
+    return best
+
+
+def _stretch(block, i0: int, i1: int) -> str:
+    """Where intervals i0..i1 of a linewise instrument lie (interval k ends at station k)."""
+    pts = block.points
+    start = pts[i0 - 1] if i0 > 0 else pts[0] - (pts[1] - pts[0] if len(pts) > 1 else 0)
+    end = pts[i1]
+    if abs(start[0] - end[0]) < 1e-9:  # vertical line: depths
+        a, b = sorted((-start[1], -end[1]))
+        return f"{a:.3g}-{b:.3g} m depth"
+    return f"from ({start[0]:.3g}, {start[1]:.3g}) to ({end[0]:.3g}, {end[1]:.3g})"
+
+
+def score_hypotheses(problem, p_hat: np.ndarray, hypotheses: list[Hypothesis], weighting: str) -> list[Scored]:
+    """Score statistic of each hypothesis at the baseline optimum (no refit)."""
+    n = problem.params.n
+    base_specs = _specs(problem, p_hat)
+    out = []
+    for h in hypotheses:
+        ext = problem.derive(base_specs + h.parameters, h.extra_values)
+        obj = Objective(ext, weighting)
+        p0 = np.concatenate([p_hat, [q.initial for q in h.parameters]])
+        zq = ext.params.to_internal(p0) / obj.scale
+        _, _, _, r, B = obj.evaluate(zq, True)
+        B1, B2 = B[:, :n], B[:, n:]
+        Q1, _ = np.linalg.qr(B1)
+        M2 = B2 - Q1 @ (Q1.T @ B2)
+        rel_norm = np.linalg.norm(M2, axis=0) / np.maximum(np.linalg.norm(B2, axis=0), 1e-300)
+        k = len(h.parameters)
+        if np.all(rel_norm < COLLINEAR):
+            coef = np.linalg.lstsq(B1, B2[:, 0], rcond=None)[0]
+            combo = ", ".join(nm for nm, c in zip(problem.params.names, coef) if abs(c) > 1e-3 * np.abs(coef).max())
+            out.append(Scored(h, 0.0, k, 1.0, collinear_with=combo, J0=float(r @ r), problem=ext))
+            continue
+        coef = np.linalg.lstsq(M2, r, rcond=None)[0]
+        S = float(np.sum((M2 @ coef) ** 2))
+        out.append(Scored(h, S, k, chi2_sf(S, k), J0=float(r @ r), problem=ext))
+    return out
+
+
+def _specs(problem, p: np.ndarray) -> list[Parameter]:
+    """The problem's parameters as case entries, started at p."""
+    specs = []
+    for i, name in enumerate(problem.params.names):
+        lo, hi = problem.params.lower[i], problem.params.upper[i]
+        pm, ps = problem.params.prior_mean[i], problem.params.prior_std[i]
+        specs.append(Parameter(
+            name=name, initial=float(np.clip(p[i], lo, hi)),
+            bounds=(float(lo), float(hi)) if np.isfinite(lo) and np.isfinite(hi) else None,
+            log=bool(problem.params.log[i]), prior={"mean": pm, "std": ps} if np.isfinite(pm) else None))
+    return specs
+
+
+def _best_of_groups(scored: list[Scored]) -> list[Scored]:
+    """One entry per group (the layer-boundary depth with the largest score)."""
+    best: dict[str, Scored] = {}
+    for s in scored:
+        g = s.hypothesis.group or s.hypothesis.key
+        if g not in best or s.score > best[g].score:
+            best[g] = s
+    return sorted(best.values(), key=lambda s: (s.p_score, -s.score))
+
+
+def diagnose(loaded, problem=None, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
+             method: str = "lm", progress=None) -> Diagnosis:
+    """Find what the model is missing (see the module docstring)."""
+    from ..problem import Problem
+
+    problem = problem or Problem(loaded)
+    weighting = loaded.case.fit.weighting
+    say = progress or (lambda msg: None)
+    say("baseline fit")
+    base_fit, base_rel, _ = _fit_and_assess(problem, method, weighting)
+    current, cur_fit, cur_rel = problem, base_fit, base_rel
+    rounds: list[Round] = []
+    accepted: list[Scored] = []
+    for _ in range(max_rounds):
+        mismatches = locate(current, cur_fit, cur_rel)
+        if cur_rel.p_value >= alpha or cur_rel.dof <= 0:
+            rounds.append(Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, [], None))
+            break
+        hyps = [h for h in candidate_hypotheses(current, cur_fit.p)]
+        say(f"scoring {len(hyps)} hypotheses")
+        scored = score_hypotheses(current, cur_fit.p, hyps, weighting)
+        ranking = _best_of_groups(scored)
+        candidates = [s for s in ranking if s.collinear_with is None][:refit_top]
+        for s in candidates:
+            tries = [s]
+            if s.hypothesis.group:  # also the neighbouring depths with the next-best scores
+                same = sorted((t for t in scored if t.hypothesis.group == s.hypothesis.group),
+                              key=lambda t: -t.score)[:3]
+                tries = same
+            for t in tries:
+                say(f"refitting with {t.hypothesis.title}")
+                t.refit, t.reliability, _ = _fit_and_assess(t.problem, method, weighting)
+                t.dJ = t.J0 - t.refit.J
+                extra = len(t.hypothesis.parameters) + (1 if t.hypothesis.group else 0)
+                t.p_lr = chi2_sf(max(t.dJ, 0.0), extra)
+                t.aic, t.bic = t.reliability.aic + 2 * (extra - len(t.hypothesis.parameters)), t.reliability.bic
+            if s.hypothesis.group:
+                winner = min(tries, key=lambda t: t.refit.J)
+                ranking[ranking.index(s)] = winner
+        refitted = [s for s in ranking if s.refit is not None]
+        threshold = alpha / max(len(refitted), 1)
+        significant = [s for s in refitted if s.p_lr < threshold and s.refit.status == "converged"]
+        choice = min(significant, key=lambda s: s.aic) if significant else None
+        rounds.append(Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, ranking, choice))
+        if choice is None:
+            break
+        accepted.append(choice)
+        current, cur_fit, cur_rel = choice.problem, choice.refit, choice.reliability
+    return Diagnosis(loaded.case.name, alpha, rounds, base_fit, base_rel, cur_fit, cur_rel, current, problem,
+                     accepted)
