@@ -210,6 +210,7 @@ class Observations:
     chol: np.ndarray
     measured: np.ndarray | None
     labels: list[Reading]
+    identified_constants: tuple = ()
 
     @property
     def m(self) -> int:
@@ -262,4 +263,4 @@ def assemble_observations(blocks: list[InstrumentBlock], fe, identified_constant
     chol_blocks = [cov.cholesky_factor(c, b.name) for c, b in zip(covs, blocks)]
     L = sla.block_diag(*chol_blocks)
     meas = None if any(v is None for v in measured) else np.concatenate(measured)
-    return Observations(blocks, P, G, names, C, L, meas, labels)
+    return Observations(blocks, P, G, names, C, L, meas, labels, tuple(sorted(identified_constants)))
