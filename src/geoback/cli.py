@@ -96,16 +96,60 @@ def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
 @friendly
 def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
-             vtu: bool = typer.Option(True, help="write the displacement/stress field as field.vtu")):
-    """Forward run with the case's ground values: predicted readings and the field."""
+             vtu: bool = typer.Option(True, help="write the displacement/stress field as field.vtu"),
+             set_: list[str] = typer.Option([], "--set", help="switch on physics: NAME=VALUE, e.g. Egrad[clay]=400, "
+                                            "n[clay]=1.5, K0grad=0.05, beta=0.7, B[I1]=0.004, zsplit[clay]=15 with "
+                                            "Esplit[clay]=25000 (repeatable)"),
+             refine: float = typer.Option(1.0, help="mesh this many times finer than the case says"),
+             noise: bool = typer.Option(False, "--noise", help="add noise drawn from each instrument's C_x"),
+             seed: int = typer.Option(0, help="seed of the noise"),
+             readings_out: Optional[Path] = typer.Option(None, help="write the readings as a CSV usable as readings_file")):
+    """Forward run: predicted readings and the field; or study data (--set, --refine, --noise, --readings-out)."""
     from .problem import Problem
-    from .simulate import simulate as run_simulation
+    from .simulate import simulate as run_simulation, synthetic_readings, write_readings_csv
 
     loaded = _load(case)
-    problem = Problem(loaded, parameters=[])
+    values = {}
+    for item in set_:
+        name, _, value = item.partition("=")
+        try:
+            values[name.strip()] = float(value)
+        except ValueError:
+            raise GeobackError(f"--set expects NAME=NUMBER, found '{item}'") from None
+    if readings_out is not None or noise or refine != 1.0:
+        readings = synthetic_readings(loaded, refine, values, noise_seed=seed if noise else None)
+        target = readings_out or _out_dir(loaded, out) / "readings.csv"
+        write_readings_csv(loaded, readings, target)
+        typer.echo(f"{sum(len(v) for v in readings.values())} readings (mesh x{refine:g} finer"
+                   f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
+        return
+    problem = Problem(loaded, parameters=[], extra_values=values, with_readings=False)
     folder = _out_dir(loaded, out)
     res = run_simulation(problem, folder, vtu=vtu and loaded.case.output.vtu)
     typer.echo(f"{problem.obs.m} readings predicted on {res['dofs']} dofs -> {folder}/predicted.csv")
+
+
+@app.command()
+@friendly
+def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
+             out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
+             alpha: float = typer.Option(0.05, help="significance level of the adequacy and hypothesis tests"),
+             plots: bool = typer.Option(True, help="write the before/after figure"),
+             quiet: bool = typer.Option(False, "--quiet", "-q")):
+    """Is the model adequate? If not: where is the mismatch, what physics is missing, how much better it fits."""
+    from .diagnose import diagnose as run_diagnosis, diagnosis_text, write_diagnosis
+    from .diagnose.report import verdict
+
+    loaded = _load(case)
+    say = None if quiet else (lambda msg: typer.echo(f"  {msg}", err=True))
+    d = run_diagnosis(loaded, alpha=alpha, progress=say)
+    folder = _out_dir(loaded, out)
+    write_diagnosis(d, folder, plots=plots)
+    if not quiet:
+        typer.echo(diagnosis_text(d))
+    else:
+        typer.echo(verdict(d))
+    typer.echo(f"-> {folder}/diagnosis.md, diagnosis.json", err=True)
 
 
 @app.command()
@@ -196,6 +240,40 @@ def covariance(case: Optional[Path] = typer.Argument(None, help="case file: prin
                  "deflectometer": {"C": var_c, "D": var_d}}[kind]
     C = cov.instrument_covariance(kind, ls, sigma, variances)
     typer.echo(cov.render_matrix(C, fmt, header=header or fmt != "csv"))
+
+
+@app.command()
+@friendly
+def batch(targets: list[str] = typer.Argument(..., help="folders (their *.yaml files, not subfolders), "
+                                              "glob patterns ('cases/**/*.yaml') or case files"),
+          workers: Optional[int] = typer.Option(None, help="local worker processes (default min(2, CPUs))"),
+          scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address (tcp://host:8786) "
+                                                  "instead of local processes"),
+          out: Path = typer.Option(Path("results/batch"), help="output folder: summary.csv and <case name>/")):
+    """Identify many cases in parallel; write summary.csv and each case's results. Exit 1 if any failed."""
+    from .batch import failed, run_batch
+
+    def progress(row):
+        extra = f": {row['message']}" if row["message"] else ""
+        typer.echo(f"  {row['case']} ({row['file']}): {row['status']}{extra}", err=True)
+
+    rows = run_batch(targets, out, workers=workers, scheduler=scheduler, progress=progress)
+    bad = failed(rows)
+    typer.echo(f"{len(rows) - len(bad)} of {len(rows)} case(s) converged -> {out / 'summary.csv'}")
+    if bad:
+        typer.echo("failed: " + ", ".join(f"{row['file']} ({row['status']})" for row in bad), err=True)
+        raise typer.Exit(1)
+
+
+@app.command()
+@friendly
+def init(path: Path = typer.Argument(Path("case.yaml"), help="file to write (default case.yaml)"),
+         force: bool = typer.Option(False, "--force", help="overwrite an existing file")):
+    """Write a commented template case (units and meaning of every field) that runs as it is."""
+    from .template import write_template
+
+    written = write_template(path, force=force)
+    typer.echo(f"wrote {written}: check it with `geoback validate {written}`, fit it with `geoback run {written}`")
 
 
 def main() -> None:  # pragma: no cover

@@ -81,7 +81,7 @@ def _line(ins) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return start, d, np.array([d[1], -d[0]])  # deflectometer: normal, d rotated clockwise
 
 
-def build_block(ins, loaded: LoadedCase, index: int) -> InstrumentBlock:
+def build_block(ins, loaded: LoadedCase, index: int, with_readings: bool = True) -> InstrumentBlock:
     kind = ins.kind
     if kind == "points":
         pts = np.asarray(ins.points, float)
@@ -129,7 +129,7 @@ def build_block(ins, loaded: LoadedCase, index: int) -> InstrumentBlock:
         block = InstrumentBlock(ins.name, kind, pts, w, labels, C, G, [f"{n}[{ins.name}]" for n in names],
                                 None, lengths=lengths, integration=cov.integration_matrix(lkind, lengths),
                                 constant_variances=variances, sigma=ins.sigma)
-    block.measured = _readings(ins, loaded, index, block)
+    block.measured = _readings(ins, loaded, index, block) if with_readings else None
     return block
 
 
@@ -221,10 +221,11 @@ class Observations:
         return sla.solve_triangular(self.chol, r, lower=True)
 
 
-def build_observations(loaded: LoadedCase, fe, identified_constants: set[str] = frozenset()) -> Observations:
+def build_observations(loaded: LoadedCase, fe, identified_constants: set[str] = frozenset(),
+                       with_readings: bool = True) -> Observations:
     """Stack every instrument of the case into one observation operator."""
     case = loaded.case
-    blocks = [build_block(ins, loaded, i) for i, ins in enumerate(case.instruments)]
+    blocks = [build_block(ins, loaded, i, with_readings) for i, ins in enumerate(case.instruments)]
     check_inside(case, blocks, loaded)
     return assemble_observations(blocks, fe, identified_constants)
 

@@ -37,7 +37,7 @@ class Problem:
     """A case meshed and assembled, ready to predict readings for any parameter values."""
 
     def __init__(self, loaded: LoadedCase, mesh: Mesh | None = None, backend: str | None = None,
-                 extra_values: dict | None = None, parameters: list | None = None):
+                 extra_values: dict | None = None, parameters: list | None = None, with_readings: bool = True):
         self.loaded = loaded
         case = self.case = loaded.case
         self.timings: dict[str, float] = {}
@@ -55,6 +55,7 @@ class Problem:
         self.counters = Counters()
         self._cache: dict = {"factor": None}  # shared with derived problems (same mesh)
         self.obs: Observations | None = None
+        self._with_readings = with_readings
         self._set_parameters(parameters if parameters is not None else case.parameters)
         self.timings["observations"] = time.perf_counter() - t2
 
@@ -63,7 +64,7 @@ class Problem:
         consts = {n for n in self.params.names if n.split("[")[0] in ("A", "B", "C", "D")}
         if self.obs is None or set(self.obs.identified_constants) != consts:
             measured = self.obs.measured if self.obs is not None else None
-            self.obs = build_observations(self.loaded, self.fe, consts)
+            self.obs = build_observations(self.loaded, self.fe, consts, self._with_readings)
             if measured is not None:  # readings set in memory (studies, diagnose) carry over
                 self.obs.measured = measured
         unknown = [n for n in consts if n not in self.obs.constant_names]

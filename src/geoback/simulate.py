@@ -93,7 +93,7 @@ def synthetic_readings(loaded, refine: float = 2.0, values: dict | None = None,
     fine = LoadedCase(refined_case(loaded.case, refine), loaded.path, loaded.marks)
     values = dict(values or {})
     constants = {k: values.pop(k) for k in list(values) if k.split("[")[0] in ("A", "B", "C", "D")}
-    problem = Problem(fine, parameters=[], extra_values=values)
+    problem = Problem(fine, parameters=[], extra_values=values, with_readings=False)
     x = problem.obs.P @ problem.displacement(problem.values)
     for name, c in constants.items():  # a reference end that moved: readings = P u - G c (eqns 11, 15, 18)
         if name not in problem.obs.constant_names:
@@ -109,3 +109,9 @@ def synthetic_readings(loaded, refine: float = 2.0, values: dict | None = None,
         out[block.name] = xi
         offset += m
     return out
+
+
+def write_readings_csv(loaded, readings: dict[str, np.ndarray], path: Path) -> None:
+    """Readings in the CSV layout `readings_file` accepts (instrument, station, reading)."""
+    rows = [[name, i + 1, v] for name, values in readings.items() for i, v in enumerate(values)]
+    write_csv(Path(path), ["instrument", "station", "reading"], rows)
