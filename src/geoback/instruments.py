@@ -225,6 +225,8 @@ def build_observations(loaded: LoadedCase, fe, identified_constants: set[str] = 
                        with_readings: bool = True) -> Observations:
     """Stack every instrument of the case into one observation operator."""
     case = loaded.case
+    if not case.instruments:
+        raise loaded.error(("instruments",), "the case has no instruments: add at least one (see `geoback schema`)")
     blocks = [build_block(ins, loaded, i, with_readings) for i, ins in enumerate(case.instruments)]
     check_inside(case, blocks, loaded)
     return assemble_observations(blocks, fe, identified_constants)
