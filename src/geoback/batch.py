@@ -1,9 +1,10 @@
 """`geoback batch`: identify many cases in parallel and tabulate them in summary.csv.
 
-Which files: a folder means every ``*.yaml`` / ``*.yml`` file directly in it (not in its
-subfolders, so a results folder or a readings folder beside the cases is never picked up;
-give a recursive glob such as ``'cases/**/*.yaml'`` for a whole tree); a glob pattern
-(``*``, ``?``, ``[...]``, ``**`` recursive) means the files it matches; a file means itself.
+Which files: a folder means every ``*.yaml`` / ``*.yml`` file in it and in its subfolders,
+recursively (hidden files and folders, whose names start with ".", are skipped), so
+``geoback batch cases`` runs every shipped case, cases/concealed/ included; a glob pattern
+(``*``, ``?``, ``[...]``, ``**`` recursive) means the files it matches (``'cases/*.yaml'``
+for the top level only); a file means itself.
 
 Where: a local process pool by default (``workers`` processes, started with the "spawn"
 method so that each worker imports numpy afresh after its BLAS/OpenMP thread count has been
@@ -55,6 +56,15 @@ def _has_magic(text: str) -> bool:
     return glob.has_magic(text)
 
 
+def _walk(folder: Path) -> list[Path]:
+    """Files under `folder`, recursively, skipping hidden files and folders."""
+    files = []
+    for root, dirs, names in os.walk(folder):
+        dirs[:] = sorted(d for d in dirs if not d.startswith("."))
+        files += [Path(root) / n for n in names if not n.startswith(".")]
+    return files
+
+
 def collect_cases(targets: Iterable[str | Path]) -> list[Path]:
     """Case files named by folders, glob patterns or files, without duplicates, sorted."""
     found: dict[str, Path] = {}
@@ -68,7 +78,7 @@ def collect_cases(targets: Iterable[str | Path]) -> list[Path]:
         else:
             path = Path(text)
             if path.is_dir():
-                matches = [p for p in path.iterdir() if p.is_file() and p.suffix.lower() in CASE_SUFFIXES]
+                matches = [p for p in _walk(path) if p.suffix.lower() in CASE_SUFFIXES]
                 if not matches:
                     raise GeobackError(f"{path} holds no case files (*.yaml, *.yml)")
             elif path.is_file():
@@ -190,11 +200,10 @@ def _run_dask(jobs: list[tuple[str, str, str]], scheduler: str, report) -> list[
         raise GeobackError(f"cannot reach the Dask scheduler at {scheduler}: {_one_line(exc)}") from None
     rows = []
     try:
-        futures = [client.submit(run_one, *job, pure=False, key=f"geoback-{i}-{_safe(job[2])}")
-                   for i, job in enumerate(jobs)]
-        index = {f.key: job for f, job in zip(futures, jobs)}
-        for fut in as_completed(futures):
-            path, out_dir, name = index[fut.key]
+        # pure=False: a fresh random key per task, so two batches sharing a cluster never merge
+        futures = {client.submit(run_one, *job, pure=False): job for job in jobs}
+        for fut in as_completed(list(futures)):
+            path, out_dir, name = futures[fut]
             try:
                 row = fut.result()
             except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker

@@ -40,6 +40,7 @@ class Fit:
     method: str
     iterations: int
     at_bound: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    counts: dict = field(default_factory=dict)  # factorisations, solves, forward runs (set by identify)
 
 
 class Objective:

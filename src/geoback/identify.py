@@ -42,6 +42,8 @@ def identify(loaded: LoadedCase, method: str | None = None, problem: Problem | N
     result = fit(problem, method=method, progress=progress, weighting=weighting)
     t2 = time.perf_counter()
     rel = reliability_of(problem, result, objective)
+    result.counts = {"factorisations": problem.counters.factorisations, "solves": problem.counters.solves,
+                     "forward_runs": problem.counters.forward_runs}  # of the fit, before any output
     seconds = dict(problem.timings, setup=t1 - t0, fit=t2 - t1, assess=time.perf_counter() - t2)
     return RunResult(problem, result, rel, objective, seconds)
 

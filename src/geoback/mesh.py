@@ -232,13 +232,14 @@ def write_mesh(mesh: Mesh, path: Path, point_data: dict | None = None, cell_data
                     point_data=point_data or {}, cell_data=cdata)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=path.suffix)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp" + path.suffix)
     os.close(fd)
     try:
         if path.suffix == ".msh":
             meshio.write(tmp, m, file_format="gmsh22", binary=False)
         else:
             meshio.write(tmp, m)
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

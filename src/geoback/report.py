@@ -34,8 +34,7 @@ def summary(res) -> dict:
         "minus_2_log_likelihood": rel.minus2logL, "aic": rel.aic, "bic": rel.bic,
         "condition_number": rel.condition, "undetermined": rel.undetermined,
         "readings": pr.obs.m, "dofs": pr.fe.ndof, "elements": pr.fe.ne,
-        "factorisations": pr.counters.factorisations, "solves": pr.counters.solves,
-        "forward_runs": pr.counters.forward_runs, "solver": pr._factor[1].backend if pr._factor else None,
+        **f.counts, "solver": pr._factor[1].backend if pr._factor else None,
         "timings_s": {k: round(v, 4) for k, v in res.seconds.items()},
         "platform": platform.platform(),
     }
@@ -47,8 +46,8 @@ def report_text(res) -> str:
     params = pr.params
     lines = [f"# geoback fit report: {pr.case.name}", ""]
     lines += [f"- status: **{f.status}** ({f.reason})",
-              f"- method: {f.method}, {f.iterations} iterations, {pr.counters.factorisations} factorisation(s), "
-              f"{pr.counters.solves} solves",
+              f"- method: {f.method}, {f.iterations} iterations, {f.counts['factorisations']} factorisation(s), "
+              f"{f.counts['solves']} solves",
               f"- readings m = {pr.obs.m}, parameters n = {params.n}, dofs = {pr.fe.ndof}",
               f"- chi-square = {rel.chi2:.6g}, dof = {rel.dof}, reduced chi-square = {rel.reduced_chi2:.4g}, "
               f"p-value = {rel.p_value:.3g}",

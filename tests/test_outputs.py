@@ -1,0 +1,171 @@
+"""Result files of `geoback run`: reproducible byte for byte, written atomically, always written."""
+from __future__ import annotations
+
+import copy
+import csv
+import io
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+import geoback.outputs
+from geoback.case import load_case
+from geoback.identify import identify, run_case
+from geoback.report import write_run
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "cases" / "tunnel-paper.yaml"
+GEOBACK = [sys.executable, "-m", "geoback.cli"]
+
+TABLES = ["parameters.csv", "covariance.csv", "correlation.csv", "eigen.csv", "information_density.csv",
+          "readings.csv", "iterations.csv"]
+VOLATILE = ("timings_s", "platform")  # legitimately differ between two runs
+
+
+@pytest.fixture()
+def cache(tmp_path, monkeypatch):
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("GEOBACK_CACHE", str(folder))
+    return folder
+
+
+def cli(*args, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run(GEOBACK + [str(a) for a in args], capture_output=True, text=True, cwd=cwd,
+                          env=dict(os.environ), timeout=300)
+
+
+def stable_summary(path: Path) -> dict:
+    data = json.loads(path.read_text())
+    for key in VOLATILE:
+        data.pop(key, None)
+    return data
+
+
+def case_variant(tmp_path: Path, name: str, **fit) -> Path:
+    """A copy of the paper case (whatever its current content) with fit settings overridden."""
+    data = yaml.safe_load(PAPER.read_text())
+    data["fit"] = {**data.get("fit", {}), **fit}
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+# (i) reproducibility --------------------------------------------------------------------------
+
+
+def test_two_runs_give_identical_files(tmp_path, cache):
+    """A cold run (gmsh meshes) and a warm run (mesh from the cache) write the same bytes."""
+    first, second = tmp_path / "first", tmp_path / "second"
+    for out in (first, second):
+        r = cli("run", PAPER, "--out", out, "-q")
+        assert r.returncode == 0, r.stderr
+    for name in TABLES + ["report.md", "field.vtu"]:
+        assert (first / name).read_bytes() == (second / name).read_bytes(), f"{name} differs between runs"
+    a, b = stable_summary(first / "summary.json"), stable_summary(second / "summary.json")
+    differing = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))
+    assert not differing, f"summary.json fields differ between identical runs: {differing}"
+    assert a["status"] == "converged"
+
+
+# (ii) atomic writes ---------------------------------------------------------------------------
+
+
+def _parse(path: Path):
+    """Parse a result file completely; a torn file raises."""
+    text = path.read_text()
+    if path.suffix == ".json":
+        return json.loads(text)
+    if path.suffix == ".csv":
+        rows = list(csv.reader(io.StringIO(text)))
+        assert rows and all(len(r) == len(rows[0]) for r in rows), f"{path.name}: ragged CSV"
+        assert text.endswith("\n"), f"{path.name}: truncated"
+        return rows
+    if path.suffix == ".vtu":
+        import meshio
+
+        return meshio.read(path)
+    return text
+
+
+def _same(path: Path, reference: Path) -> bool:
+    if path.name == "summary.json":
+        return stable_summary(path) == stable_summary(reference)
+    return path.read_bytes() == reference.read_bytes()
+
+
+class Interrupted(Exception):
+    pass
+
+
+def test_interrupted_run_leaves_old_or_new_files(tmp_path, cache, monkeypatch):
+    """Fail the n-th rename of a run into a folder holding an older run's results, for every n:
+    each file is afterwards either completely the old or completely the new version, every file
+    parses, and no temporary file is left behind."""
+    weighting = yaml.safe_load(PAPER.read_text()).get("fit", {}).get("weighting", "full")
+    old_case = case_variant(tmp_path, "old.yaml", max_iterations=2,  # an older run that differs in every file
+                            weighting="full" if weighting == "identity" else "identity")
+    old, new = tmp_path / "old", tmp_path / "new"
+    run_case(load_case(old_case), old)
+    result = identify(load_case(PAPER))  # identified once; written again for every n below
+    counters = copy.copy(result.problem.counters)  # writing field.vtu adds a solve to them
+    write_run(result, new)
+    names = sorted(p.name for p in new.iterdir())
+    assert sorted(p.name for p in old.iterdir()) == names
+    for name in names:
+        assert not _same(old / name, new / name), f"{name}: old and new runs must differ for this test"
+
+    real_replace = os.replace
+    state = {}
+
+    def failing_replace(src, dst, *args, **kwargs):
+        if Path(dst).parent == state["out"]:
+            if state["left"] == 0:
+                raise Interrupted(f"killed before renaming onto {Path(dst).name}")
+            state["left"] -= 1
+        return real_replace(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(geoback.outputs.os, "replace", failing_replace)
+    for n in range(len(names)):
+        out = tmp_path / f"run{n}"
+        shutil.copytree(old, out)
+        state.update(out=out, left=n)
+        result.problem.counters = copy.copy(counters)
+        with pytest.raises(Interrupted):
+            write_run(result, out)
+        present = sorted(p.name for p in out.iterdir())
+        assert present == names, f"after {n} renames: unexpected files {sorted(set(present) - set(names))}"
+        renewed = 0
+        for name in names:
+            _parse(out / name)
+            is_new, is_old = _same(out / name, new / name), _same(out / name, old / name)
+            assert is_new or is_old, f"after {n} renames: {name} is neither the old nor the new version"
+            renewed += is_new and not is_old
+        assert renewed == n, f"after {n} renames {renewed} files are new"
+    monkeypatch.undo()
+
+
+# (iii) a fit that runs out of iterations ------------------------------------------------------
+
+
+def test_max_iterations_still_writes_everything(tmp_path, cache):
+    case = case_variant(tmp_path, "short.yaml", max_iterations=1)
+    out = tmp_path / "out"
+    r = cli("run", case, "--out", out)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "not converged" in r.stdout + r.stderr
+    for name in TABLES + ["report.md", "summary.json", "field.vtu"]:
+        assert (out / name).is_file(), name
+        _parse(out / name)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "not converged"
+    assert summary["iterations"] == 1
+    assert "maximum number of iterations" in summary["stop_reason"]
+    assert "did not converge" in (out / "report.md").read_text()
+    with open(out / "iterations.csv") as fh:
+        assert len(list(csv.DictReader(fh))) >= 1
