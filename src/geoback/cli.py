@@ -244,9 +244,9 @@ def covariance(case: Optional[Path] = typer.Argument(None, help="case file: prin
 
 @app.command()
 @friendly
-def batch(targets: list[str] = typer.Argument(..., help="folders (their *.yaml files, not subfolders), "
-                                              "glob patterns ('cases/**/*.yaml') or case files"),
-          workers: Optional[int] = typer.Option(None, help="local worker processes (default min(2, CPUs))"),
+def batch(targets: list[str] = typer.Argument(..., help="folders (every *.yaml in them, recursively), "
+                                              "glob patterns ('cases/*.yaml') or case files"),
+          workers: Optional[int] = typer.Option(None, help="local worker processes (default min(2, CPUs); unused with --scheduler)"),
           scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address (tcp://host:8786) "
                                                   "instead of local processes"),
           out: Path = typer.Option(Path("results/batch"), help="output folder: summary.csv and <case name>/")):
