@@ -93,10 +93,10 @@ def assess(names: list[str], p: np.ndarray, A: np.ndarray, residual: np.ndarray,
     corr[~np.isfinite(corr)] = np.nan
     np.fill_diagonal(corr, 1.0)
     Q = As @ Cs @ As.T
-    chi2 = float(rw @ rw)
+    chi2 = float(rw @ rw) + J_prior  # the priors are observations too (dof counts them)
     dof = m - n + int(np.count_nonzero(prec))
     pval = chi2_sf(chi2, dof)
     logdet = 2 * float(np.sum(np.log(np.abs(np.diag(L)))))
-    m2logL = chi2 + J_prior + logdet + m * np.log(2 * np.pi)
+    m2logL = chi2 + logdet + m * np.log(2 * np.pi)
     return Reliability(list(names), p, Cp, std, corr, s, Vt.T, cond, Q, np.diag(Q).copy(), rw, chi2, dof, pval,
                        float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined)

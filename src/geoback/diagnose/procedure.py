@@ -146,10 +146,12 @@ def _strongest_run(z: np.ndarray) -> tuple[int, int, float]:
 def _stretch(block, i0: int, i1: int) -> str:
     """Where intervals i0..i1 of a linewise instrument lie (interval k ends at station k)."""
     pts = block.points
-    start = pts[i0 - 1] if i0 > 0 else pts[0] - (pts[1] - pts[0] if len(pts) > 1 else 0)
+    d = (pts[1] - pts[0]) / np.linalg.norm(pts[1] - pts[0]) if len(pts) > 1 else np.array([0.0, 1.0])
+    reference = pts[0] - d * block.lengths[0]
+    start = pts[i0 - 1] if i0 > 0 else reference
     end = pts[i1]
     if abs(start[0] - end[0]) < 1e-9:  # vertical line: depths
-        a, b = sorted((-start[1], -end[1]))
+        a, b = sorted((abs(start[1]), abs(end[1])))
         return f"{a:.3g}-{b:.3g} m depth"
     return f"from ({start[0]:.3g}, {start[1]:.3g}) to ({end[0]:.3g}, {end[1]:.3g})"
 
@@ -204,6 +206,84 @@ def _best_of_groups(scored: list[Scored]) -> list[Scored]:
     return sorted(best.values(), key=lambda s: (s.p_score, -s.score))
 
 
+def _compare(s: Scored, J0: float, searched: int) -> None:
+    """Likelihood-ratio test and information criteria of a refitted hypothesis; `searched` counts
+    extra quantities chosen by search rather than by the fit (a boundary's depth)."""
+    extra = len(s.hypothesis.parameters) + searched
+    s.J0 = J0
+    s.dJ = J0 - s.refit.J
+    s.p_lr = chi2_sf(max(s.dJ, 0.0), extra)
+    m = len(s.reliability.whitened_residual)
+    s.aic = s.reliability.aic + 2 * searched
+    s.bic = s.reliability.bic + searched * np.log(m)
+
+
+def _split_layer_problem(current, layer: str, z: float, p_hat: np.ndarray, E_below: float):
+    """The current model with layer `layer` split at depth z into two meshed layers (conforming
+    boundary) and the lower layer's modulus identified."""
+    from ..case import LoadedCase
+    from ..problem import Problem
+
+    case = current.case
+    layers = list(case.ground.layers)
+    i = [ly.name for ly in layers].index(layer)
+    lower = layers[i].model_copy(update={"name": f"{layer}_below", "top": float(z), "E": float(E_below)})
+    ground = case.ground.model_copy(update={"layers": layers[:i + 1] + [lower] + layers[i + 1:]})
+    split = LoadedCase(case.model_copy(update={"ground": ground}), current.loaded.path, current.loaded.marks)
+    specs = _specs(current, p_hat) + [Parameter(name=f"E[{layer}_below]", initial=float(E_below),
+                                                bounds=(float(E_below) / 50, float(E_below) * 50))]
+    extra = {k: v for k, v in current.values.items() if k not in current.ground.baseline()}
+    problem = Problem(split, parameters=specs, extra_values=extra, backend=current.backend)
+    problem.obs.measured = current.obs.measured
+    return problem
+
+
+def _refit_layer_boundary(current, cur_fit: Fit, group: list[Scored], method: str, weighting: str, say) -> Scored:
+    """Profile the boundary depth: conforming refits at the best-scored depths, then bisect."""
+    layer = group[0].hypothesis.key.split("[", 1)[1].split("@")[0]
+    key = f"zsplit[{layer}]"
+    depths = sorted(t.hypothesis.extra_values[key] for t in group)
+    step = depths[1] - depths[0] if len(depths) > 1 else 1.0
+    lo_z = current.case.ground.layers[[ly.name for ly in current.case.ground.layers].index(layer)].top
+    hi_z = ([ly.top for ly in current.case.ground.layers if ly.top > lo_z] + [current.case.geometry.depth])[0]
+    by_depth = {t.hypothesis.extra_values[key]: t for t in group}
+    tried: dict[float, Scored] = {}
+
+    def attempt(z: float, template: Scored) -> None:
+        z = round(float(z), 3)
+        if z in tried or not lo_z < z < hi_z:
+            return
+        say(f"refitting with a layer boundary at {z:g} m in '{layer}'")
+        E0 = float(template.problem.values.get(f"Esplit[{layer}]", current.values[f"E[{layer}]"]))
+        try:
+            problem = _split_layer_problem(current, layer, z, cur_fit.p, E0)
+        except Exception as exc:  # a depth gmsh cannot mesh (too close to the tunnel): skip it
+            say(f"  skipped depth {z:g} m: {exc}")
+            return
+        h = template.hypothesis
+        hyp = Hypothesis(f"layer-boundary[{layer}@{z:g}]", h.kind, f"a different stratum below {z:g} m in '{layer}'",
+                         f"Below {z:g} m depth the ground of '{layer}' has another modulus (an unmodelled layer "
+                         f"boundary, meshed as a new layer '{layer}_below').",
+                         [Parameter(name=f"E[{layer}_below]", initial=E0)], {key: z}, group=h.group)
+        t = Scored(hyp, template.score, template.dof, template.p_score, problem=problem)
+        t.refit, t.reliability, _ = _fit_and_assess(problem, method, weighting)
+        _compare(t, cur_fit.J, 1)
+        tried[z] = t
+
+    for t in group[:3]:
+        attempt(t.hypothesis.extra_values[key], t)
+    for width in (step / 2, step / 4):
+        best_z = min(tried, key=lambda z: tried[z].refit.J)
+        nearest = by_depth[min(by_depth, key=lambda d: abs(d - best_z))]
+        attempt(best_z - width, nearest)
+        attempt(best_z + width, nearest)
+    best = min(tried.values(), key=lambda t: t.refit.J)
+    within = [z for z, t in tried.items() if t.refit.J - best.refit.J < 3.84]  # profile likelihood, 95 %
+    best.hypothesis.description += (f" Depths tried: {', '.join(f'{z:g}' for z in sorted(tried))} m; those within the "
+                                    f"95 % profile-likelihood band: {min(within):g}-{max(within):g} m.")
+    return best
+
+
 def diagnose(loaded, problem=None, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
              method: str = "lm", progress=None) -> Diagnosis:
     """Find what the model is missing (see the module docstring)."""
@@ -228,21 +308,14 @@ def diagnose(loaded, problem=None, alpha: float = 0.05, max_rounds: int = 2, ref
         ranking = _best_of_groups(scored)
         candidates = [s for s in ranking if s.collinear_with is None][:refit_top]
         for s in candidates:
-            tries = [s]
-            if s.hypothesis.group:  # also the neighbouring depths with the next-best scores
-                same = sorted((t for t in scored if t.hypothesis.group == s.hypothesis.group),
-                              key=lambda t: -t.score)[:3]
-                tries = same
-            for t in tries:
-                say(f"refitting with {t.hypothesis.title}")
-                t.refit, t.reliability, _ = _fit_and_assess(t.problem, method, weighting)
-                t.dJ = t.J0 - t.refit.J
-                extra = len(t.hypothesis.parameters) + (1 if t.hypothesis.group else 0)
-                t.p_lr = chi2_sf(max(t.dJ, 0.0), extra)
-                t.aic, t.bic = t.reliability.aic + 2 * (extra - len(t.hypothesis.parameters)), t.reliability.bic
             if s.hypothesis.group:
-                winner = min(tries, key=lambda t: t.refit.J)
+                group = sorted((t for t in scored if t.hypothesis.group == s.hypothesis.group), key=lambda t: -t.score)
+                winner = _refit_layer_boundary(current, cur_fit, group, method, weighting, say)
                 ranking[ranking.index(s)] = winner
+                continue
+            say(f"refitting with {s.hypothesis.title}")
+            s.refit, s.reliability, _ = _fit_and_assess(s.problem, method, weighting)
+            _compare(s, s.J0, 0)
         refitted = [s for s in ranking if s.refit is not None]
         threshold = alpha / max(len(refitted), 1)
         significant = [s for s in refitted if s.p_lr < threshold and s.refit.status == "converged"]

@@ -36,7 +36,7 @@ def verdict(d) -> str:
     for s in d.accepted:
         est = "; ".join(f"{n} = {v:.4g} ± {sd:.2g} (95 % [{lo:.4g}, {hi:.4g}])" for n, v, sd, lo, hi in _estimates(s))
         depth = ""
-        if s.hypothesis.extra_values:
+        if s.hypothesis.extra_values and s.hypothesis.kind != "layer-boundary":
             depth = " at " + ", ".join(f"{k} = {v:g} m" for k, v in s.hypothesis.extra_values.items())
         parts.append(f"{s.hypothesis.title}{depth}: {est}")
     f = d.final_reliability
