@@ -98,7 +98,7 @@ def locate(problem, res: Fit, rel: Reliability) -> list[Mismatch]:
     """Each instrument's share of J and its most significant stretch of misfit."""
     out = []
     r = problem.obs.measured - res.x
-    J = float(rel.whitened_residual @ rel.whitened_residual)
+    J = rel.chi2  # data and priors
     offset = 0
     for block in problem.obs.blocks:
         m = len(block.labels)
@@ -128,6 +128,15 @@ def locate(problem, res: Fit, rel: Reliability) -> list[Mismatch]:
                 f"({abs(stat):.1f} σ); {100 * share:.0f} % of J")
         out.append(Mismatch(block.name, block.kind, share, where, size, float(abs(stat)), text))
         offset += m
+    params = problem.params
+    for i in np.flatnonzero(params.has_prior):  # a prior the readings contradict is a mismatch too
+        z = (res.p[i] - params.prior_mean[i]) / params.prior_std[i]
+        share = z * z / J if J > 0 else 0.0
+        text = (f"prior on {params.names[i]}: the readings put it at {res.p[i]:.4g} {params.units[i]}, "
+                f"{abs(z):.1f} σ from the prior {params.prior_mean[i]:.4g} ± {params.prior_std[i]:.2g}; "
+                f"{100 * share:.0f} % of J")
+        out.append(Mismatch(f"prior:{params.names[i]}", "prior", share, "", float(res.p[i] - params.prior_mean[i]),
+                            float(abs(z)), text))
     return sorted(out, key=lambda mm: -mm.share)
 
 
