@@ -42,6 +42,13 @@ def friendly(func):
     return wrapper
 
 
+def _console():
+    """Progress goes to stderr through rich (colour on terminals, plain text in pipes and CI)."""
+    from rich.console import Console
+
+    return Console(stderr=True, soft_wrap=True)
+
+
 def _load(case: Path):
     from .case import load_case
 
@@ -141,7 +148,8 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
     from .diagnose.report import verdict
 
     loaded = _load(case)
-    say = None if quiet else (lambda msg: typer.echo(f"  {msg}", err=True))
+    console = _console()
+    say = None if quiet else (lambda msg: console.print(f"  [dim]{msg}[/]", highlight=False))
     d = run_diagnosis(loaded, alpha=alpha, progress=say)
     folder = _out_dir(loaded, out)
     write_diagnosis(d, folder, plots=plots)
@@ -170,11 +178,14 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
     folder = _out_dir(loaded, out)
     names = [p.name for p in loaded.case.parameters]
 
+    console = _console()
+
     def progress(it):
         if not quiet and not as_json:
-            vals = ", ".join(f"{n} = {v:.6g}" for n, v in zip(names, it.p))
-            typer.echo(f"  iteration {it.k:2d}  mu = {it.mu:8.2g}  J = {it.J:.6g}  "
-                       f"{'accepted' if it.accepted else 'rejected'}  {vals}", err=True)
+            vals = "  ".join(f"{n} = {v:.6g}" for n, v in zip(names, it.p))
+            mark = "[green]accepted[/]" if it.accepted else "[yellow]rejected[/]"
+            console.print(f"  iteration {it.k:2d}  mu = {it.mu:8.2g}  J = {it.J:<12.6g} {mark}  {vals}",
+                          highlight=False)
 
     res = run_case(loaded, folder, method=method, progress=progress, plots=plots)
     if as_json:
