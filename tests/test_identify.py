@@ -43,7 +43,8 @@ def test_run_writes_outputs_with_one_factorisation(paper_case_path, tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["factorisations"] == 1
     assert summary["status"] == "converged"
-    assert summary["solves"] >= summary["iterations"]
+    # the load is linear in K0 and K = E k: after u for two loads every solve is a combination of them
+    assert 1 <= summary["solves"] <= 3 < summary["forward_runs"]
     assert abs(summary["parameters"]["E[clay]"]["estimate"] / 10000 - 1) < 0.005
     rows = (tmp_path / "readings.csv").read_text().splitlines()
     assert len(rows) == 1 + res.problem.obs.m

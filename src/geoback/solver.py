@@ -39,12 +39,25 @@ def default_backend(n: int | None = None) -> str:
     return available_backends()[0]
 
 
+SPAN_TOL = 1e-12  # a right-hand side this close to the span of earlier ones reuses their solutions
+MAX_BASIS = 16
+
+
 class Factorisation:
-    """Factor of one SPD matrix (given as upper CSR); solve() is a back-substitution."""
+    """Factor of one SPD matrix (given as upper CSR); solve() is a back-substitution.
+
+    Solutions are remembered: a right-hand side that is a linear combination of earlier ones
+    (to SPAN_TOL) is answered from them without a back-substitution. Loads of excavations are
+    linear in K0 and the release factor, so after a couple of solves a whole identification
+    with one modulus needs no more (eqns 41-42 taken one step further).
+    """
 
     def __init__(self, upper: sp.csr_matrix, backend: str | None = None):
         self.n = upper.shape[0]
         self.backend = backend or default_backend(self.n)
+        self.backsubstitutions = 0
+        self._Q = np.zeros((self.n, 0))  # orthonormal basis of the right-hand sides met so far
+        self._U = np.zeros((self.n, 0))  # K^-1 Q
         if self.backend == "pardiso":
             import pypardiso
 
@@ -56,13 +69,49 @@ class Factorisation:
             full = (upper + sp.triu(upper, k=1, format="csr").T).tocsc()
             self._lu = spla.splu(full, permc_spec="COLAMD")
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        rhs = np.asarray(rhs, dtype=float)
+    def _backsolve(self, rhs: np.ndarray) -> np.ndarray:
+        self.backsubstitutions += rhs.shape[1]
         if self.backend == "pardiso":
-            out = self._solver.solve(self._matrix, rhs)
+            out = self._solver.solve(self._matrix, np.ascontiguousarray(rhs))
         else:
             out = self._lu.solve(rhs)
         return np.asarray(out).reshape(rhs.shape)
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        rhs = np.asarray(rhs, dtype=float)
+        B = rhs.reshape(self.n, -1)
+        out = np.zeros_like(B)
+        todo = []
+        for j in range(B.shape[1]):
+            b = B[:, j]
+            nb = np.linalg.norm(b)
+            if nb == 0:
+                continue
+            c = self._Q.T @ b
+            if np.linalg.norm(b - self._Q @ c) <= SPAN_TOL * nb:
+                out[:, j] = self._U @ c
+            else:
+                todo.append(j)
+        if todo:
+            X = self._backsolve(B[:, todo])
+            for k, j in enumerate(todo):
+                out[:, j] = X[:, k]
+                self._remember(B[:, j], X[:, k])
+        return out.reshape(rhs.shape)
+
+    def _remember(self, b: np.ndarray, x: np.ndarray) -> None:
+        if self._Q.shape[1] >= MAX_BASIS:
+            return
+        c = self._Q.T @ b
+        q = b - self._Q @ c
+        c2 = self._Q.T @ q  # re-orthogonalise once (classical Gram-Schmidt twice is enough)
+        q -= self._Q @ c2
+        c += c2
+        nq = np.linalg.norm(q)
+        if nq <= 1e-10 * np.linalg.norm(b):
+            return
+        self._Q = np.column_stack([self._Q, q / nq])
+        self._U = np.column_stack([self._U, (x - self._U @ c) / nq])
 
     def release(self) -> None:
         if self.backend == "pardiso":

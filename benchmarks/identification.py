@@ -1,0 +1,189 @@
+"""Identification cost: `geoback run` against scipy.optimize.least_squares with an FD Jacobian.
+
+The paper case (cases/tunnel-paper.yaml: E, K0 from inclinometer I1 and extensometer X1, its
+readings and its weighting) with both element sizes divided by --scale (default 11.6: about
+100 k DOFs). Two ways to identify E and K0 from E = 5 MPa, K0 = 0.5:
+
+  geoback    the library path of `geoback run` (geoback.identify.run_case: mesh from the
+             cache, assembly, LM fit with exact sensitivities, reliability, and every output file
+             of `geoback run`, field.vtu included) into a temporary folder. No subprocess: the
+             CLI adds only its start-up (imports) to this.
+  scipy      scipy.optimize.least_squares(fun, z0, jac='2-point', method=--ls-method) on the
+             same whitened residuals r' = L^-1 (x* - x(p)) in the same scaled variables
+             z = p / p_initial, where fun calls geoback's own forward solve after dropping the
+             factorisation, so every call assembles and factorises K afresh - what an external
+             finite-difference loop around a forward code does. Factorisations = fun calls.
+
+Both start from a warm mesh cache (meshing is reported separately and counted for neither);
+both times include building the Problem (FE model, instruments). The covariance of the
+estimate from least_squares (inv(J^t J) with its final Jacobian) is compared with geoback's
+C_p. Floors (issue): >= 10x fewer factorisations and >= 5x less time for geoback.
+
+    python benchmarks/identification.py [--scale 11.6] [--ls-method trf|lm] [--csv out.csv]
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import csv
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER_CASE = ROOT / "cases" / "tunnel-paper.yaml"
+FLOOR_FACTORISATIONS, FLOOR_TIME = 10.0, 5.0
+
+
+def loaded_case(scale: float):
+    from geoback.case import LoadedCase, case_from_data
+
+    with open(PAPER_CASE, encoding="utf-8") as fh:
+        data = yaml.safe_load(fh)
+    data = copy.deepcopy(data)
+    data["name"] = f"tunnel-paper-x{scale:g}"
+    data["mesh"]["size_tunnel"] = data["mesh"]["size_tunnel"] / scale
+    data["mesh"]["size_far"] = data["mesh"]["size_far"] / scale
+    return LoadedCase(case_from_data(data), PAPER_CASE, {})
+
+
+def drop_factorisation(problem) -> None:
+    """Forget (and free) the problem's factorisation: the next solve factorises K again."""
+    problem.forget_factorisation()
+
+
+def run_geoback(loaded) -> dict:
+    from geoback.identify import run_case
+
+    with tempfile.TemporaryDirectory() as out:
+        c0, t0 = time.process_time(), time.perf_counter()
+        res = run_case(loaded, Path(out))
+        seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    pr = res.problem
+    parts = res.seconds
+    outputs = seconds - parts.get("setup", 0.0) - parts.get("fit", 0.0) - parts.get("assess", 0.0)
+    return dict(seconds=seconds, cpu=cpu, setup=parts.get("setup", float("nan")), outputs=outputs, fit_seconds=res.seconds.get("fit", float("nan")), p=res.fit.p,
+                status=res.fit.status, iterations=res.fit.iterations, factorisations=pr.counters.factorisations,
+                solves=pr.counters.solves, forward_runs=pr.counters.forward_runs, dofs=pr.fe.ndof,
+                covariance=res.reliability.covariance, weighting=res.objective.weighting,
+                backend=pr._factor[1].backend if pr._factor else "?",
+                factor_seconds=pr.counters.seconds_factorising, solve_seconds=pr.counters.seconds_solving)
+
+
+def run_scipy(loaded, ls_method: str) -> dict:
+    from scipy.linalg import solve_triangular
+    from scipy.optimize import least_squares
+
+    from geoback.estimate import Objective
+    from geoback.problem import Problem
+
+    c0, t0 = time.process_time(), time.perf_counter()
+    problem = Problem(loaded)
+    objective = Objective(problem, loaded.case.fit.weighting)  # the same whitening L as geoback
+    L, measured = objective.L, objective.measured
+    p0 = problem.params.initial.copy()
+    scale = np.abs(p0)
+    calls = {"n": 0}
+
+    def fun(z):
+        calls["n"] += 1
+        drop_factorisation(problem)  # an external code refactorises for every forward run
+        return solve_triangular(L, measured - problem.predict(z * scale), lower=True)
+
+    lo, hi = problem.params.lower / scale, problem.params.upper / scale
+    t1 = time.perf_counter()
+    if ls_method == "lm":
+        ls = least_squares(fun, p0 / scale, jac="2-point", method="lm")
+    else:
+        ls = least_squares(fun, p0 / scale, jac="2-point", method=ls_method, bounds=(lo, hi))
+    t2, cpu = time.perf_counter(), time.process_time() - c0
+    J = ls.jac / scale
+    cov = np.linalg.inv(J.T @ J)
+    drop_factorisation(problem)
+    return dict(seconds=t2 - t0, cpu=cpu, fit_seconds=t2 - t1, p=ls.x * scale, status=ls.message, success=ls.success,
+                calls=calls["n"], factorisations=problem.counters.factorisations, solves=problem.counters.solves,
+                nfev=ls.nfev, njev=ls.njev, covariance=cov, dofs=problem.fe.ndof)
+
+
+def rel_frobenius(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    d = np.sqrt(np.diag(b))
+    std = np.linalg.norm((a - b) / np.outer(d, d)) / np.linalg.norm(b / np.outer(d, d))
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b)), float(std)
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scale", type=float, default=11.6, help="divide the paper case's element sizes by this")
+    ap.add_argument("--ls-method", choices=("trf", "lm", "dogbox"), default="trf")
+    ap.add_argument("--backend", choices=("pardiso", "scipy"), default=None,
+                    help="sparse solver for both methods (sets GEOBACK_SOLVER; default: geoback's choice)")
+    ap.add_argument("--csv", type=Path, default=None, help="also write the table as CSV")
+    args = ap.parse_args(argv)
+
+    if args.backend:
+        os.environ["GEOBACK_SOLVER"] = args.backend
+    from geoback.mesh import build_mesh
+
+    loaded = loaded_case(args.scale)
+    t0 = time.perf_counter()
+    build_mesh(loaded.case)  # warm the cache: meshing is counted for neither method
+    mesh_seconds = time.perf_counter() - t0
+
+    g = run_geoback(loaded)
+    s = run_scipy(loaded, args.ls_method)
+    frob, frob_std = rel_frobenius(s["covariance"], g["covariance"])
+    ratio_f = s["factorisations"] / g["factorisations"]
+    ratio_t = s["seconds"] / g["seconds"]
+    ratio_fit = s["fit_seconds"] / g["fit_seconds"]
+    ratio_cpu = s["cpu"] / g["cpu"]
+
+    rows = [
+        ("DOFs", g["dofs"]),
+        ("solver backend", g["backend"]),
+        ("weighting (case)", g["weighting"]),
+        ("mesh (gmsh, once, not counted) [s]", round(mesh_seconds, 2)),
+        ("geoback run: wall time (setup + fit + assess + outputs) [s]", round(g["seconds"], 2)),
+        ("geoback run: fit only [s]", round(g["fit_seconds"], 2)),
+        ("geoback run: CPU time, all threads [s]", round(g["cpu"], 2)),
+        ("geoback run: Problem build / writing outputs [s]", f"{g['setup']:.2f} / {g['outputs']:.2f}"),
+        ("geoback: factorisations", g["factorisations"]),
+        ("geoback: solves (right-hand sides)", g["solves"]),
+        ("geoback: forward runs / iterations", f"{g['forward_runs']} / {g['iterations']}"),
+        ("geoback: seconds factorising / solving", f"{g['factor_seconds']:.2f} / {g['solve_seconds']:.2f}"),
+        ("geoback: E, K0", f"{g['p'][0]:.6g}, {g['p'][1]:.6g} ({g['status']})"),
+        (f"least_squares({args.ls_method}, 2-point): wall time (setup + fit) [s]", round(s["seconds"], 2)),
+        ("least_squares: fit only [s]", round(s["fit_seconds"], 2)),
+        ("least_squares: CPU time, all threads [s]", round(s["cpu"], 2)),
+        ("least_squares: factorisations (= fun calls)", s["factorisations"]),
+        ("least_squares: fun calls / nfev / njev", f"{s['calls']} / {s['nfev']} / {s['njev']}"),
+        ("least_squares: E, K0", f"{s['p'][0]:.6g}, {s['p'][1]:.6g} (success={s['success']})"),
+        ("ratio factorisations (scipy / geoback)", round(ratio_f, 1)),
+        ("ratio wall time (scipy / geoback)", round(ratio_t, 1)),
+        ("ratio fit-only time (scipy / geoback)", round(ratio_fit, 1)),
+        ("ratio CPU time (scipy / geoback)", round(ratio_cpu, 1)),
+        ("load average (1 min) at the end", round(os.getloadavg()[0], 2)),
+        ("C_p vs least_squares inv(J^t J): relative Frobenius", f"{frob:.2e} (standardised {frob_std:.2e})"),
+        (f"floor factorisations >= {FLOOR_FACTORISATIONS:g}x", "PASS" if ratio_f >= FLOOR_FACTORISATIONS else "FAIL"),
+        (f"floor time >= {FLOOR_TIME:g}x", "PASS" if ratio_t >= FLOOR_TIME else "FAIL"),
+        ("C_p within 2 %", "PASS" if max(frob, frob_std) < 0.02 else "FAIL"),
+    ]
+    width = max(len(k) for k, _ in rows)
+    for k, v in rows:
+        print(f"{k.ljust(width)}  {v}")
+    if args.csv:
+        args.csv.parent.mkdir(parents=True, exist_ok=True)
+        with open(args.csv, "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh, lineterminator="\n")
+            w.writerow(["quantity", "value"])
+            w.writerows(rows)
+    return dict(rows)
+
+
+if __name__ == "__main__":
+    import sys
+
+    main(sys.argv[1:])

@@ -1,0 +1,181 @@
+"""Small versions of the studies (studies/*.py) and the checks of C_p and A against scipy / FD.
+
+Each study is run with --small into a temporary folder; the tests assert the direction of
+each effect (paper Figs. 7, 9-10, and the calibration of the 95 % ellipse of C_p).
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+STUDIES = ROOT / "studies"
+if str(STUDIES) not in sys.path:
+    sys.path.insert(0, str(STUDIES))
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _cache(tmp_path_factory):
+    """Meshes of this module go to a temporary cache (GEOBACK_CACHE), never the user's home."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("GEOBACK_CACHE", str(tmp_path_factory.mktemp("geoback-cache")))
+        yield
+
+
+@pytest.fixture(scope="module")
+def out(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("studies-out")
+
+
+def _outputs_exist(out: Path, name: str) -> None:
+    assert (out / f"{name}.csv").stat().st_size > 0
+    assert (out / f"{name}.png").stat().st_size > 0
+
+
+# ----------------------------------------------------------------------------- (a) Fig. 7
+def test_measurement_count_std_decreases_and_is_proportional_to_sigma(out, capsys):
+    import measurement_count as study
+
+    rows = study.main(["--small", "--out", str(out)])
+    _outputs_exist(out, study.NAME)
+    assert "readings" in capsys.readouterr().out
+    s1, s2 = study.SIGMAS
+    by = {(r["sigma_m"], r["readings"]): r for r in rows}
+    counts = [2, 12, 24, 55]
+    for sigma in (s1, s2):
+        for key in ("std_E_kPa", "std_K0"):
+            stds = [by[sigma, m][key] for m in counts]
+            assert all(np.isfinite(stds))
+            assert all(a > b for a, b in zip(stds, stds[1:])), (sigma, key, stds)
+        for m in counts:  # every layout identifies the truth from noise-free fine-mesh readings
+            assert by[sigma, m]["status"] == "converged"
+            assert abs(by[sigma, m]["E_hat_kPa"] / 10000 - 1) < 0.01
+            assert abs(by[sigma, m]["K0_hat"] - 1) < 0.01
+    for m in counts:  # exactly proportional to sigma (C_p scales with sigma^2)
+        for key in ("std_E_kPa", "std_K0"):
+            assert by[s2, m][key] / by[s1, m][key] == pytest.approx(s2 / s1, rel=1e-9)
+
+
+# ----------------------------------------------------------------------------- (b) Figs. 9-10
+def test_covariance_structure_full_cx_beats_identity(out):
+    import covariance_structure as study
+
+    rows = study.main(["--small", "--out", str(out)])
+    _outputs_exist(out, study.NAME)
+    full = next(r for r in rows if r["weighting"] == "full")
+    ident = next(r for r in rows if r["weighting"] == "identity")
+    assert full["realisations"] >= 40
+    assert full["rmse_E_kPa"] < ident["rmse_E_kPa"]
+    assert full["rmse_K0"] < ident["rmse_K0"]
+    # the discretisation bias is negligible against the noise (sigma_alpha = 0.005 rad)
+    assert abs(full["bias_E_kPa"]) < 0.05 * full["rmse_E_kPa"]
+    assert abs(full["bias_K0"]) < 0.05 * full["rmse_K0"]
+
+
+# ----------------------------------------------------------------------------- (c) calibration
+def test_calibration_fraction_inside_95_ellipse(out):
+    import calibration as study
+
+    row = study.main(["--small", "--out", str(out)])
+    _outputs_exist(out, study.NAME)
+    assert row["realisations"] == 100
+    assert 0.85 <= row["fraction_inside_95"] <= 1.0, row
+    # the fitting mesh's bias is small against the std, so the test measures C_p, not the mesh
+    assert abs(row["bias_E_in_std"]) < study.BIAS_LIMIT
+    assert abs(row["bias_K0_in_std"]) < study.BIAS_LIMIT
+    # the scatter of the estimates agrees with C_p (100 samples: sd within ~ +-14 % at 2 se)
+    assert row["sample_sd_E_kPa"] == pytest.approx(row["Cp_std_E_kPa"], rel=0.2)
+    assert row["sample_sd_K0"] == pytest.approx(row["Cp_std_K0"], rel=0.2)
+
+
+# ----------------------------------------------------------------------------- C_p vs scipy
+def test_cp_equals_scipy_least_squares_covariance():
+    """C_p (eqn 55) equals inv(J^t J) of scipy.optimize.least_squares on the whitened residuals."""
+    from scipy.optimize import least_squares
+
+    import common as C
+    from geoback.identify import identify
+    from geoback.simulate import synthetic_readings
+
+    data = C.case_dict(weighting="full")
+    loaded = C.loaded_case(data)
+    noisy = synthetic_readings(loaded, refine=2.0, noise_seed=7)
+    loaded = C.loaded_case(C.with_readings(data, noisy))
+    res = identify(loaded, weighting="full")
+    assert res.fit.status == "converged"
+    problem = res.problem
+    Cp = res.reliability.covariance
+
+    L = problem.obs.chol  # C_x = L L^t, full instrument covariance
+    from scipy.linalg import solve_triangular
+
+    measured = problem.obs.measured
+    scale = np.abs(problem.params.initial)
+
+    def whitened_residual(z):
+        return solve_triangular(L, measured - problem.predict(z * scale), lower=True)
+
+    ls = least_squares(whitened_residual, problem.params.initial / scale, jac="3-point", method="lm",
+                       xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    assert ls.success
+    J = ls.jac / scale  # d r' / d p in physical units
+    cov = np.linalg.inv(J.T @ J)
+    np.testing.assert_allclose(ls.x * scale, res.fit.p, rtol=1e-4)
+    rel_frob = np.linalg.norm(cov - Cp) / np.linalg.norm(Cp)
+    d = np.sqrt(np.diag(Cp))  # also in standardised units, where K0's entries count as much as E's
+    rel_frob_std = np.linalg.norm((cov - Cp) / np.outer(d, d)) / np.linalg.norm(Cp / np.outer(d, d))
+    print(f"C_p vs least_squares: relative Frobenius {rel_frob:.2e} (standardised {rel_frob_std:.2e})")
+    assert rel_frob < 0.02, rel_frob
+    assert rel_frob_std < 0.02, rel_frob_std
+
+
+# ----------------------------------------------------------------------------- A vs central FD
+def _two_layer_case():
+    import common as C
+
+    data = C.case_dict(mesh_scale=0.5, name="two-layers")
+    data["ground"]["K0"] = 1.0
+    data["ground"]["layers"] = [
+        {"name": "clay", "top": 0.0, "E": "8 MPa", "nu": 0.3},
+        {"name": "marl", "top": 9.0, "E": "25 MPa", "nu": 0.45, "K0": 0.8},
+    ]
+    data["parameters"] = [
+        {"name": "E[clay]", "initial": "8 MPa"},
+        {"name": "E[marl]", "initial": "25 MPa"},
+        {"name": "nu[clay]", "initial": 0.3},
+        {"name": "K0", "initial": 1.0},
+        {"name": "K0[marl]", "initial": 0.8},
+        {"name": "B[I1]", "initial": 0.002},
+    ]
+    for ins in data["instruments"]:
+        if ins["name"] == "I1":
+            ins["var_b"] = 1e-6
+    return C.loaded_case(data)
+
+
+def test_sensitivities_match_central_differences():
+    from geoback.problem import Problem
+
+    problem = Problem(_two_layer_case())
+    names = problem.params.names
+    assert names == ["E[clay]", "E[marl]", "nu[clay]", "K0", "K0[marl]", "B[I1]"]
+    p = problem.params.initial.copy()
+    x, A = problem.predict_with_sensitivity(p)
+    steps = {"E[clay]": 1e-4 * p[0], "E[marl]": 1e-4 * p[1], "nu[clay]": 1e-5, "K0": 1e-4, "K0[marl]": 1e-4,
+             "B[I1]": 1e-4}
+    for j, name in enumerate(names):
+        h = steps[name]
+        up, down = p.copy(), p.copy()
+        up[j] += h
+        down[j] -= h
+        fd = (problem.predict(up) - problem.predict(down)) / (2 * h)
+        err = np.linalg.norm(fd - A[:, j]) / np.linalg.norm(A[:, j])
+        assert err < 1e-6, (name, err)
+    # B[I1] shifts every inclinometer reading by -1 (x = P u - G c) and nothing else
+    rows_i1 = [i for i, lab in enumerate(problem.obs.labels) if lab.instrument == "I1"]
+    col = A[:, names.index("B[I1]")]
+    np.testing.assert_array_equal(col[rows_i1], -1.0)
+    assert np.count_nonzero(col) == len(rows_i1)
