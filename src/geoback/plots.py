@@ -18,7 +18,7 @@ from __future__ import annotations
 import copy
 import io
 import sys
-from dataclasses import dataclass
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -58,15 +58,6 @@ RC = {"font.size": 9.5, "axes.titlesize": 10.5, "axes.labelsize": 9.5, "legend.f
 
 
 # ---------------------------------------------------------------------------------------- helpers
-@dataclass
-class _Context:
-    """What several figures share: the run and the other method's fit."""
-
-    res: object
-    other: object | None  # Fit of the other method (or None)
-    other_note: str = ""
-
-
 def _other_method(method: str) -> str:
     return "lm" if method == "gn" else "gn"
 
@@ -139,7 +130,10 @@ def _J_many(res, P: np.ndarray) -> np.ndarray:
                 elif fact is not ref:
                     raise _NotBatchable
                 rhs.append(pr.fe.load(st.sigma_v, st.sigma_h) / s)
-            U = pr._solve(ref, 1.0, np.column_stack(rhs))
+            if getattr(ref, "backend", None) == "pardiso":  # blocked solves pay off
+                U = pr._solve(ref, 1.0, np.column_stack(rhs))
+            else:  # SuperLU: one right-hand side at a time is far faster than a block
+                U = np.column_stack([pr._solve(ref, 1.0, r) for r in rhs])
             pr.counters.forward_runs += len(chunk)
             X = np.column_stack([pr._readings(U[:, k], p) for k, p in enumerate(chunk)])
             R = obj.whiten(obj.measured[:, None] - X)
@@ -204,8 +198,9 @@ def objective_contours_figure(res, other=None, grid: int | None = None) -> Figur
     lo = np.minimum(lo, p_hat[[i, j]] - 0.3 * span)  # room around the minimum for V1, V2
     hi = np.maximum(hi, p_hat[[i, j]] + 0.3 * span)
     blo, bhi = params.lower[[i, j]], params.upper[[i, j]]
-    lo = np.where(np.isfinite(blo), np.maximum(lo, blo + 1e-9 * np.abs(blo)), lo)
-    hi = np.where(np.isfinite(bhi), np.minimum(hi, bhi - 1e-9 * np.abs(bhi)), hi)
+    with np.errstate(invalid="ignore"):
+        lo = np.where(np.isfinite(blo), np.maximum(lo, blo + 1e-9 * np.abs(blo)), lo)
+        hi = np.where(np.isfinite(bhi), np.minimum(hi, bhi - 1e-9 * np.abs(bhi)), hi)
 
     def at(a, b):
         p = p_hat.copy()
@@ -226,9 +221,9 @@ def objective_contours_figure(res, other=None, grid: int | None = None) -> Figur
     Jg = _J_many(res, grid_p).reshape(ng, ng)
     A, B = np.meshgrid(a * fi, b * fj)
     good = np.isfinite(Jg) & (Jg > 0)
-    jmin_plot = min(np.nanmin(np.where(good, Jg, np.nan)), f.J if f.J > 0 else np.inf)
+    jmin_grid = np.nanmin(np.where(good, Jg, np.nan))
     jmax = np.nanmax(np.where(good, Jg, np.nan))
-    low = max(jmin_plot, jmax * 1e-6, 1e-300)
+    low = max(jmin_grid, jmax * 1e-6, 1e-300)
     levels = np.logspace(np.log10(low), np.log10(jmax), 16)
     Jc = np.clip(np.where(good, Jg, np.nan), low, jmax)
     cs = ax.contourf(A, B, Jc, levels=levels, norm=LogNorm(low, jmax), cmap="viridis_r", extend="neither")
@@ -258,10 +253,22 @@ def objective_contours_figure(res, other=None, grid: int | None = None) -> Figur
     ax.plot(*ph, marker="P", ms=11, color="#ff7f0e", mec="k", mew=1.0, ls="none", zorder=6,
             label="estimate p̂")
 
-    # SVD directions at the minimum: V holds relative changes dp/p -> (dp_i, dp_j) = v p_hat
+    # SVD directions at the minimum (eqns 44-49): V holds relative changes dp/p, so the plot's
+    # (dp_i, dp_j) = (v_i p_i, v_j p_j). With more than two parameters the directions of the
+    # plotted slice are those of the SVD of the two plotted columns of the whitened sensitivity.
+    if n == 2:
+        V, sv = rel.directions, rel.singular_values
+        vlabel = "SVD direction at p̂"
+    else:
+        As = res.objective.whiten(f.A[:, [i, j]]) * np.where(p_hat[[i, j]] != 0, np.abs(p_hat[[i, j]]), 1.0)
+        _, sv, Vt = np.linalg.svd(As, full_matrices=False)
+        V = np.zeros((n, 2))
+        V[[i, j], :] = Vt.T
+        vlabel = "SVD direction of this slice at p̂"
     xr, yr = (a[-1] - a[0]) * fi, (b[-1] - b[0]) * fj
-    for k in range(min(2, rel.directions.shape[1])):
-        v = rel.directions[:, k]
+    svd_handles = []
+    for k in range(min(2, V.shape[1])):
+        v = V[:, k]
         d = np.array([v[i] * p_hat[i] * fi, v[j] * p_hat[j] * fj])
         dn = np.hypot(d[0] / xr, d[1] / yr)
         if not np.isfinite(dn) or dn == 0:
@@ -275,25 +282,26 @@ def objective_contours_figure(res, other=None, grid: int | None = None) -> Figur
                     arrowprops=dict(arrowstyle="-|>", lw=2.0, color="k" if k == 0 else "0.35",
                                     shrinkA=0, shrinkB=0, mutation_scale=14))
         u_ = d / [xr, yr] / np.hypot(*(d / [xr, yr]))  # direction on screen (frame fractions)
-        ax.annotate(f"V{k + 1}  (s{k + 1} = {rel.singular_values[k]:.3g})", xy=(ph[0] + d[0], ph[1] + d[1]),
-                    xytext=(10 * u_[0], 10 * u_[1]), textcoords="offset points", fontsize=8.5, zorder=6,
+        ax.annotate(f"V{k + 1}", xy=(ph[0] + d[0], ph[1] + d[1]), fontweight="bold",
+                    xytext=(7 * u_[0], 7 * u_[1]), textcoords="offset points", fontsize=9, zorder=6,
                     annotation_clip=False, ha="left" if u_[0] > 0.3 else "right" if u_[0] < -0.3 else "center",
                     va="bottom" if u_[1] > 0.3 else "top" if u_[1] < -0.3 else "center",
-                    bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8))
+                    bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.75))
+        svd_handles.append(Line2D([], [], color="k" if k == 0 else "0.35", lw=2, marker=r"$\rightarrow$", ms=10,
+                                  ls="none", label=f"V{k + 1}: {vlabel}, s{k + 1} = {sv[k]:.3g}"))
     ax.set_xlim(a[0] * fi, a[-1] * fi)
     ax.set_ylim(b[0] * fj, b[-1] * fj)
     ax.set_xlabel(_axis_label(params, i, p_hat[i]))
     ax.set_ylabel(_axis_label(params, j, p_hat[j]))
     held = [nm for k, nm in enumerate(params.names) if k not in (i, j)]
-    sub = f"grid {ng}×{ng}"
-    if refactorises:
-        sub += " (capped: every grid point refactorises the stiffness)"
+    lines = [f"Objective function J({params.names[i]}, {params.names[j]}) and iteration paths",
+             f"{res.objective.weighting} weighting, correlation {rel.correlation[i, j]:+.2f}, grid {ng}×{ng}"
+             + (" (capped: every grid point refactorises the stiffness)" if refactorises else "")]
     if held:
-        sub += "; " + ", ".join(held) + " held at the estimate"
-    corr = rel.correlation[i, j]
-    ax.set_title(f"Objective function J({params.names[i]}, {params.names[j]}) and iteration paths\n"
-                 f"{res.objective.weighting} weighting, correlation {corr:+.2f}; {sub}", fontsize=10)
-    ax.legend(loc="lower right", framealpha=0.9)
+        lines.append(f"slice with {', '.join(held)} held at the estimate; paths projected onto it")
+    ax.set_title("\n".join(lines), fontsize=10)
+    handles, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=handles + svd_handles, loc="lower right", framealpha=0.9)
     return fig
 
 
@@ -308,13 +316,17 @@ def _objective_1d(fig, ax, res, paths) -> Figure:
         lo = max(lo, params.lower[0])
     if np.isfinite(params.upper[0]):
         hi = min(hi, params.upper[0])
-    grid = np.linspace(lo, hi, 120)
-    Jg = np.array([_J(res, np.array([v])) for v in grid])
+    grid = np.union1d(np.linspace(lo, hi, 120), pts[(pts >= lo) & (pts <= hi)])
+    Jg = _J_many(res, grid[:, None])
     ax.semilogy(grid * fi, Jg, color="0.3", lw=1.5, label="J")
     for method, acc, _ in paths:
         st = METHOD_STYLE.get(method, METHOD_STYLE["lm"])
         ax.plot([h.p[0] * fi for h in acc], [max(h.J, 1e-300) for h in acc], color=st["color"], ls=st["ls"],
                 marker=st["marker"], label=f"{METHOD_NAMES.get(method, method)} ({len(acc) - 1} iterations)")
+    ax.plot(paths[0][1][0].p[0] * fi, max(paths[0][1][0].J, 1e-300), marker="*", ms=15, color="white", mec="k",
+            ls="none", zorder=6, label="start p₀")
+    ax.plot(f.p[0] * fi, max(f.J, 1e-300), marker="P", ms=11, color="#ff7f0e", mec="k", ls="none", zorder=6,
+            label="estimate p̂")
     ax.set_xlabel(_axis_label(params, 0, f.p[0]))
     ax.set_ylabel("objective J [-]")
     ax.set_title(f"Objective function J({params.names[0]}) and iteration paths")
@@ -328,7 +340,7 @@ def convergence_figure(res, other=None) -> Figure:
     fig = _new_figure(11.0, 4.3)
     axJ, axP = fig.subplots(1, 2)
     fits = [res.fit] + ([other] if other is not None else [])
-    colours = colormaps["tab10"]
+    colours = colormaps["Dark2"]  # parameters (methods keep their blue / red)
     for fit in fits:
         st = METHOD_STYLE.get(fit.method, METHOD_STYLE["lm"])
         acc = _accepted(fit.history)
@@ -345,8 +357,9 @@ def convergence_figure(res, other=None) -> Figure:
         for m in range(params.n):
             vals = np.array([h.p[m] for h in acc])
             y = vals / final[m] if final[m] != 0 else vals
-            axP.plot(k, y, color=colours(m % 10), ls=st["ls"], marker=st["marker"], ms=4.5, lw=1.5,
-                     mfc="white" if fit is not fits[0] else colours(m % 10))
+            # later parameters drawn thinner on top, so coinciding curves stay visible
+            axP.plot(k, y, color=colours(m % 8), ls=st["ls"], marker=st["marker"], ms=max(6.5 - 1.5 * m, 3),
+                     lw=max(2.6 - 0.7 * m, 0.9), mfc="white" if fit is not fits[0] else colours(m % 8))
     if any(not h.accepted for fit in fits for h in fit.history):
         axJ.plot([], [], ls="none", marker="x", color="0.4", label="rejected trial step")
     axJ.set_xlabel("iteration k [-]")
@@ -357,8 +370,8 @@ def convergence_figure(res, other=None) -> Figure:
     axP.set_xlabel("iteration k [-]")
     axP.set_ylabel("parameter / final estimate [-]")
     axP.set_title("Parameters per iteration")
-    handles = [Line2D([], [], color=colours(m % 10), lw=2, label=f"{params.names[m]} "
-                      f"(p̂ = {res.fit.p[m]:.4g} {params.units[m]})".replace(" -)", ")"))
+    handles = [Line2D([], [], color=colours(m % 8), lw=2,
+                      label=f"{params.names[m]} (p̂ = {_value_text(params, m, res.fit.p[m])})")
                for m in range(params.n)]
     handles += [Line2D([], [], color="0.3", **{k: v for k, v in METHOD_STYLE.get(fit.method, METHOD_STYLE["lm"]).items()
                                                if k != "color"}, label=METHOD_NAMES.get(fit.method, fit.method))
@@ -412,7 +425,7 @@ def information_density_figure(res, top: int = 3) -> Figure:
                       loc="upper left", fontsize=8, framealpha=0.9)
     axh = fig.add_subplot(gs[:, 1])
     im = axh.imshow(Q, cmap="RdBu_r", norm=TwoSlopeNorm(0.0, -vmax, vmax), interpolation="nearest",
-                    extent=(0.5, m + 0.5, m + 0.5, 0.5))
+                    extent=(0.5, m + 0.5, m + 0.5, 0.5), aspect="auto")
     if show_ticks:
         axh.set_xticks(idx)
         axh.set_yticks(idx)
@@ -425,8 +438,12 @@ def information_density_figure(res, top: int = 3) -> Figure:
         axh.axvline(bnd, color="k", lw=0.8)
     axh.set_xlabel("reading j")
     axh.set_ylabel("reading i")
-    axh.set_title(f"Information density matrix Q (trace = {np.trace(Q):.2f} = n)", fontsize=10)
-    cb = fig.colorbar(im, ax=axh, shrink=0.8, pad=0.02)
+    axh.set_title(f"Information density matrix Q (trace = {np.trace(Q):.2f})", fontsize=10)
+    if res.objective.weighting == "full" and any(b.integration is not None for b in pr.obs.blocks):
+        fig.suptitle("Q relates the whitened readings L⁻¹x (full weighting): for linewise instruments "
+                     "the i-th whitened reading is essentially the i-th primary (incremental) reading",
+                     fontsize=9.5, color="0.25")
+    cb = fig.colorbar(im, ax=axh, shrink=0.95, pad=0.02)
     cb.set_label("Q_ij [-]")
     return fig
 
@@ -467,10 +484,11 @@ def instruments_figure(res) -> Figure:
         xm, xc, sg, r_ = measured[rows] * mm, computed[rows] * mm, sigma[rows] * mm, rw[rows]
         chi2_block = float(r_ @ r_)
         linewise = block.integration is not None
-        what = {"inclinometer": "horizontal displacement u_x (+ away from the axis)",
-                "sliding_micrometer": "displacement along the line (+ towards its far end)",
-                "extensometer": "displacement along the line (+ towards its far end)",
-                "deflectometer": "displacement normal to the line"}.get(block.kind, "displacement")
+        if linewise:
+            w0 = block.weights[0, 0]  # the measured direction (the same at every station)
+            what = {"inclinometer": "horizontal displacement u_x", "deflectometer": "displacement normal to the line"
+                    }.get(block.kind, "displacement along the line")
+            what += f" ({_direction_words(w0)})"
         if linewise:
             start, d, s = _line_geometry(block)
             vertical = abs(d[1]) >= abs(d[0])
@@ -516,57 +534,82 @@ def instruments_figure(res) -> Figure:
                 ax.set_xlabel("horizontal distance from the symmetry axis x [m]")
                 ax.set_ylabel(f"{what} [mm]")
                 tr = blended_transform_factory(ax.transData, ax.transAxes)
-                for c_, rv in zip(coord, r_):
-                    ax.text(c_, 1.01, f"{rv:+.2f}", transform=tr, fontsize=7.5, va="bottom", ha="center",
-                            rotation=90, color="#b22222" if abs(rv) > 2 else "0.25")
+                for c_, rv in zip(coord, r_):  # residuals along the top, inside the frame
+                    ax.text(c_, 0.985, f"{rv:+.2f}", transform=tr, fontsize=7, va="top", ha="center",
+                            rotation=90 if len(coord) > 8 else 0, color="#b22222" if abs(rv) > 2 else "0.25",
+                            bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none", alpha=0.7))
+                lo_, hi_ = ax.get_ylim()
+                ax.set_ylim(lo_, hi_ + 0.12 * (hi_ - lo_))  # room for the residuals
         else:
             k = np.arange(1, len(rows) + 1)
             ax.errorbar(k, xm, yerr=2 * sg, ls="none", marker="x", ms=7, mew=1.8, color="k", capsize=4,
                         elinewidth=1.0, label="measured ± 2σ (case C_x)")
             ax.plot(k, xc, ls="none", marker="o", ms=6, mfc="white", mec="#1f77b4", mew=1.6, label="computed")
-            ax.axhline(0, color="0.7", lw=0.7, zorder=0)
             ax.set_xticks(k)
-            ax.set_xticklabels([f"{lab.station} {lab.component}" for lab in block.labels], rotation=45, ha="right")
+            if block.kind == "points":
+                ax.set_xticklabels([f"{lab.component} at ({lab.x:g}, {lab.y:g})" for lab in block.labels],
+                                   rotation=35, ha="right", rotation_mode="anchor")
+                ax.set_xlabel("reading: component at point (x, y) [m]")
+                ax.set_ylabel("displacement [mm]\n(u_x + away from the axis, u_y + up)")
+            else:
+                ax.set_xticklabels([f"chord {lab.station}" for lab in block.labels])
+                ax.set_xlabel("chord")
+                ax.set_ylabel("change of chord length (+ lengthening) [mm]")
             ax.set_xlim(0.4, len(rows) + 0.6)
-            ax.set_xlabel("reading (point component / chord)")
-            ax.set_ylabel("displacement [mm]" if block.kind == "points" else "chord convergence [mm]")
             for k_, y_, rv in zip(k, xm, r_):
                 ax.annotate(f"r′={rv:+.2f}", (k_, y_), xytext=(6, 0), textcoords="offset points", fontsize=7.5,
                             va="center", color="#b22222" if abs(rv) > 2 else "0.25")
         ax.set_title(f"{block.name} ({block.kind}, {len(rows)} readings)", fontsize=10)
-        ax.text(0.03, 0.03 if not (linewise and vertical) else 0.03,
-                f"Σ r′² = {chi2_block:.3g}\nmax |r′| = {np.max(np.abs(r_)):.3g}\nr′ = L⁻¹(x* − x(p̂))",
+        ax.text(0.03, 0.03, f"Σ r′² = {chi2_block:.3g}\nmax |r′| = {np.max(np.abs(r_)):.3g}",
                 transform=ax.transAxes, fontsize=8, va="bottom", ha="left",
                 bbox=dict(boxstyle="round,pad=0.3", fc="white", ec="0.7", alpha=0.9))
-        ax.legend(loc="upper right" if (linewise and vertical) else "best", fontsize=8, framealpha=0.9)
         ax.grid(True, color="0.92", lw=0.6)
         ax.set_axisbelow(True)
     for ax in axes[nb:]:
         ax.set_visible(False)
+    handles = [Patch(color="0.55", alpha=0.25, label="measured ± 2σ (σ from diag C_x of the case)"),
+               Line2D([], [], color="#1f77b4", lw=1.2, alpha=0.7, label="model along the line (at p̂)"),
+               Line2D([], [], ls="none", marker="o", ms=6, mfc="white", mec="#1f77b4", mew=1.6,
+                      label="computed at the stations"),
+               Line2D([], [], ls="none", marker="x", ms=7, mew=1.8, color="k", label="measured"),
+               Line2D([], [], ls="none", marker="$r′$", ms=9, color="0.25",
+                      label="whitened residual r′ = L⁻¹(x* − x(p̂)) (red if |r′| > 2)")]
+    fig.legend(handles=handles, loc="outside lower center", ncols=3, fontsize=8.5, frameon=False)
     fig.suptitle(f"Measured and computed readings at the estimate (fit: {res.objective.weighting} weighting; "
                  f"σ and whitened residuals r′ from the case's C_x)", fontsize=10.5)
     return fig
 
 
+def _direction_words(v: np.ndarray) -> str:
+    """'+ downwards' etc. for a measured direction vector (x away from the axis, y up)."""
+    v = np.asarray(v, float)
+    if abs(v[1]) < 1e-9 * np.hypot(*v):
+        return "+ away from the axis" if v[0] > 0 else "+ towards the axis"
+    if abs(v[0]) < 1e-9 * np.hypot(*v):
+        return "+ upwards" if v[1] > 0 else "+ downwards"
+    return f"+ along ({v[0]:.2f}, {v[1]:.2f})"
+
+
+def _value_text(params, k: int, value: float) -> str:
+    fct, unit = _display(params.names[k], params.units[k], value)
+    return f"{value * fct:.4g}" + (f" {unit}" if unit not in ("-", "") else "")
+
+
 def _estimate_text(params, p) -> str:
-    parts = []
-    for k, name in enumerate(params.names):
-        fct, unit = _display(name, params.units[k], p[k])
-        parts.append(f"{name} = {p[k] * fct:.4g}" + (f" {unit}" if unit not in ("-", "") else ""))
-    return ", ".join(parts)
+    return ", ".join(f"{name} = {_value_text(params, k, p[k])}" for k, name in enumerate(params.names))
 
 
 def field_figure(res) -> Figure:
     """Deformed mesh coloured by |u|, magnified, with the instruments (corner-node triangulation)."""
     pr, f = res.problem, res.fit
     mesh, g = pr.mesh, pr.case.geometry
-    u = pr.full_displacement(f.p)
+    ufree = pr.displacement(pr.values_for(f.p))
+    u = pr.fe.expand(ufree).reshape(-1, 2)  # (N, 2) nodal displacements
     umag = np.hypot(u[:, 0], u[:, 1])
     umax = float(umag.max()) if umag.size else 0.0
     factor = _nice_factor(FIELD_TARGET * g.radius / umax) if umax > 0 else 1.0
     xy = mesh.nodes + factor * u
     T = Triangulation(xy[:, 0], xy[:, 1], mesh.triangles[:, :3])
-    ufree = pr.displacement(pr.values_for(f.p))
     inst = []  # (block, displaced stations, displaced line or None)
     for block in pr.obs.blocks:
         line = None
@@ -574,13 +617,17 @@ def field_figure(res) -> Figure:
             start, d, s = _line_geometry(block)
             line = start[None] + np.linspace(0, s[-1], 60)[:, None] * d[None]
         pts = block.points if line is None else np.vstack([block.points, line])
-        try:
-            Ix, Iy = pr.fe.interpolation(pts)
-            moved = pts + factor * np.column_stack([Ix @ ufree, Iy @ ufree])
-        except ValueError:
-            moved = pts
+        moved = pts.copy()
+        inside = pr.fe.locate(pts)[0] >= 0
+        if inside.any():
+            Ix, Iy = pr.fe.interpolation(pts[inside])
+            moved[inside] += factor * np.column_stack([Ix @ ufree, Iy @ ufree])
         n = len(block.points)
-        inst.append((block, moved[:n], None if line is None else moved[n:]))
+        if block.kind == "convergence":  # a straight chord between its two (displaced) ends
+            line_moved = moved[:n]
+        else:
+            line_moved = None if line is None else moved[n:]
+        inst.append((block, moved[:n], line_moved))
     cx, cy, R = 0.0, -g.axis_depth, g.radius
     # zoom on the tunnel: about 2.5 radii around it, cut at the ground surface
     zx = (-0.04 * 2.6 * R, min(g.width, 2.6 * R))
@@ -591,10 +638,7 @@ def field_figure(res) -> Figure:
     fig = _new_figure(4.9 * (ratios[0] + ratios[1]) + 1.6, 5.6)
     axF, axZ = fig.subplots(1, 2, width_ratios=ratios)
     top = umax * 1e3 if umax > 0 else 1.0
-    levels = MaxNLocator(nbins=16).tick_values(0.0, top)
-    levels = levels[levels <= top * (1 + 1e-9)] if levels[-1] > top * 1.0001 and len(levels) > 2 else levels
-    if levels[-1] < top:
-        levels = np.append(levels, top)
+    levels = MaxNLocator(nbins=14).tick_values(0.0, top)
     norm = matplotlib.colors.Normalize(0.0, levels[-1])
     cmap = colormaps["magma_r"]
     colours = colormaps["tab10"]
@@ -607,6 +651,12 @@ def field_figure(res) -> Figure:
                 label="tunnel wall before excavation")
         ax.plot([0, g.width, g.width, 0, 0], [0, 0, -g.depth, -g.depth, 0], color="0.35", lw=0.9, ls=":",
                 label="model boundary before excavation")
+        for li, layer in enumerate(pr.case.ground.layers[1:]):
+            ax.axhline(-layer.top, color="0.15", lw=0.9, ls=(0, (6, 3)), zorder=3,
+                       label="layer interface (before excavation)" if li == 0 else None)
+            if not zoom:
+                ax.text(0.99 * g.width, -layer.top, f"{layer.name} ↓", ha="right", va="top", fontsize=7.5,
+                        path_effects=HALO, zorder=3)
         for k, (block, P, line) in enumerate(inst):
             c = colours(k % 10)
             if line is not None:
@@ -636,8 +686,8 @@ def field_figure(res) -> Figure:
     axF.legend(loc="lower right", fontsize=8, framealpha=0.92)
     cb = fig.colorbar(tpc, ax=[axF, axZ], shrink=0.9, pad=0.015, aspect=30)
     cb.set_label("displacement magnitude |u| [mm]")
-    fig.suptitle(f"{pr.case.name}: excavation-induced displacements at the estimate "
-                 f"({_estimate_text(pr.params, f.p)})\n"
+    est = textwrap.fill(f"({_estimate_text(pr.params, f.p)})", 110)
+    fig.suptitle(f"{pr.case.name}: excavation-induced displacements at the estimate\n{est}\n"
                  f"max |u| = {umax * 1e3:.1f} mm; deformation magnified ×{factor:g} "
                  f"(max |u| drawn as {factor * umax / R:.0%} of the tunnel radius R = {R:g} m)", fontsize=10.5)
     return fig
@@ -679,14 +729,30 @@ def build_figures(res, names: tuple[str, ...] = FIGURES, other: bool = True) -> 
                     figs[name] = instruments_figure(res)
                 elif name == "field":
                     figs[name] = field_figure(res)
-    finally:
-        pr.counters = saved
+    finally:  # in place: problems derived from this one share the counters object
+        vars(pr.counters).update(vars(saved))
     return figs
 
 
+def _compact_png(data: bytes) -> bytes:
+    """The PNG with an adaptive 256-colour palette (a third of the size, no visible change)."""
+    try:
+        from PIL import Image
+
+        im = Image.open(io.BytesIO(data)).convert("RGB")
+        q = im.quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+        buf = io.BytesIO()
+        q.save(buf, format="PNG", optimize=True)
+        return buf.getvalue() if buf.tell() < len(data) else data
+    except Exception:  # noqa: BLE001 - Pillow missing or too old: keep matplotlib's PNG
+        return data
+
+
 def save_figures(figs: dict[str, Figure], out: Path, formats: tuple[str, ...] = FORMATS,
-                 dpi: int = DPI) -> list[Path]:
-    """Write each figure as out/<name>.<format> (atomically); return the paths."""
+                 dpi: int = DPI, compact: bool = True) -> list[Path]:
+    """Write each figure as out/<name>.<format> (atomically); return the paths.
+
+    compact: store PNGs with a 256-colour palette (Pillow), about three times smaller."""
     out = Path(out)
     paths = []
     with matplotlib.rc_context(RC):
@@ -695,8 +761,11 @@ def save_figures(figs: dict[str, Figure], out: Path, formats: tuple[str, ...] = 
                 buf = io.BytesIO()
                 meta = {"Date": None} if fmt == "svg" else {"Software": None} if fmt == "png" else None
                 fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta)
+                data = buf.getvalue()
+                if fmt == "png" and compact:
+                    data = _compact_png(data)
                 path = out / f"{name}.{fmt}"
-                write_atomic(path, buf.getvalue())
+                write_atomic(path, data)
                 paths.append(path)
     return paths
 

@@ -73,8 +73,8 @@ class Factorisation:
         self.backsubstitutions += rhs.shape[1]
         if self.backend == "pardiso":
             out = self._solver.solve(self._matrix, np.ascontiguousarray(rhs))
-        else:
-            out = self._lu.solve(rhs)
+        else:  # SuperLU is much slower on a block of columns than on each column in turn
+            out = np.column_stack([self._lu.solve(np.ascontiguousarray(rhs[:, j])) for j in range(rhs.shape[1])])
         return np.asarray(out).reshape(rhs.shape)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
