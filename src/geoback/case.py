@@ -19,7 +19,7 @@ from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationE
                       model_validator)
 
 from .errors import CaseError
-from .yamlmarks import format_path, load_yaml_with_marks, locate
+from .yamlmarks import format_path, load_yaml_with_marks, locate, printable
 
 _UNITS = {"pa": 1e-3, "kpa": 1.0, "mpa": 1e3, "gpa": 1e6}
 
@@ -43,7 +43,7 @@ def _show(value: Any) -> str:
         text = value if len(value) <= 50 else value[:47] + "..."
         return "an empty string" if not value else repr(text)
     if isinstance(value, dict):
-        keys = ", ".join(str(k) for k in list(value)[:6]) + (", ..." if len(value) > 6 else "")
+        keys = ", ".join(printable(k) for k in list(value)[:6]) + (", ..." if len(value) > 6 else "")
         return f"a mapping ({keys})" if value else "an empty mapping {}"
     if isinstance(value, (list, tuple)):
         if not value:
@@ -345,6 +345,80 @@ def _instrument_problems(g: Geometry, i: int, ins) -> list[tuple[tuple, str]]:
     return out
 
 
+MAX_RADIUS = 1e3  # m: gmsh's geometry kernel fails on larger tunnels (and none is that large)
+MAX_SIZE = 1e5  # m: width and depth of the model
+MAX_STATIONS = 2_000  # stations per instrument: its covariance matrix is dense
+MAX_ELEMENTS = 1_000_000  # estimated triangles of the mesh: beyond this gmsh and the solver take far too long
+_GROWTH = 0.25  # as geoback.mesh.GROWTH: element size grows by this fraction of the distance from the wall
+
+
+def _line_length(ins) -> float:
+    if ins.kind == "inclinometer":
+        return ins.toe_depth - ins.head_depth
+    return math.hypot(ins.end[0] - ins.start[0], ins.end[1] - ins.start[1])
+
+
+def _station_count(ins) -> tuple[int, str]:
+    """Number of stations of a linewise instrument and the field that sets it."""
+    if ins.lengths is not None:
+        return len(ins.lengths), "lengths"
+    if ins.stations is not None:
+        return ins.stations, "stations"
+    return max(int(math.floor(_line_length(ins) / ins.spacing + 1e-9)), 1), "spacing"
+
+
+def _covariance_problem(ins) -> tuple[str, str] | None:
+    """A reading covariance that cannot be factorised (sigma's square underflows, or the
+    integration constants' variances swamp it): (field, message)."""
+    s2 = ins.sigma * ins.sigma  # (** would raise OverflowError)
+    if not (s2 > 0 and math.isfinite(s2) and math.isfinite(1.0 / s2)):
+        return "sigma", (f"expected a standard deviation whose square is a usable number (between about "
+                         f"1e-150 and 1e150), found {_g(ins.sigma)}")
+    if ins.kind not in ("inclinometer", "sliding_micrometer", "extensometer", "deflectometer"):
+        return None
+    from . import covariance as cov  # numpy only; no geoback imports
+
+    kind = cov.normalise_kind(ins.kind)
+    variances = {n: getattr(ins, f"var_{n.lower()}") for n in cov.constant_names(kind)}
+    try:
+        n, _ = _station_count(ins)
+        lengths = cov.station_lengths(lengths=ins.lengths) if ins.lengths is not None else \
+            cov.station_lengths(stations=n, spacing=ins.spacing)
+        C = cov.instrument_covariance(kind, lengths, ins.sigma, variances)
+        cov.cholesky_factor(C, ins.name)
+    except cov.NotPositiveDefinite as exc:
+        big = ", ".join(f"var_{k.lower()} {_g(v)}" for k, v in variances.items() if v)
+        return "sigma", (f"expected sigma {_g(ins.sigma)}" + (f" and {big}" if big else "")
+                         + f" to give a positive-definite reading covariance, found it singular ({exc})")
+    except ValueError:
+        return None  # reported with its context when the instrument is built
+    return None
+
+
+def _mesh_estimate(case: Case) -> dict[str, float]:
+    """Rough number of triangles gmsh will make, split by the mesh size responsible."""
+    try:
+        return _mesh_estimate_(case)
+    except (ZeroDivisionError, OverflowError, ValueError):
+        return {"size_far": math.inf}
+
+
+def _mesh_estimate_(case: Case) -> dict[str, float]:
+    g, m = case.geometry, case.mesh
+    t = m.size_tunnel or g.radius / 8
+    far = m.size_far or max(g.width, g.depth) / 12
+    k = 2.31  # triangles per h^2 of area (equilateral)
+    out = {"size_far": k * g.width * g.depth / (far * far), "size_tunnel": 0.0, "size_instruments": 0.0}
+    if far > t:  # graded ring around the wall: integral of 1/h^2 over the half annulus
+        out["size_tunnel"] = k * math.pi / _GROWTH * ((g.radius - t / _GROWTH) * (1 / t - 1 / far)
+                                                      + math.log(far / t) / _GROWTH)
+    si = m.size_instruments
+    if si and far > si:
+        points = sum(len(ins.points) if ins.kind in ("points", "convergence") else 25 for ins in case.instruments)
+        out["size_instruments"] = points * k * 2 * math.pi * (0.5 + math.log(far / si) / _GROWTH ** 2)
+    return out
+
+
 def physical_problems(case: Case) -> list[tuple[tuple, str]]:
     """Checks pydantic cannot express field by field: (path, message) for each problem."""
     g, problems = case.geometry, []
@@ -360,6 +434,15 @@ def physical_problems(case: Case) -> list[tuple[tuple, str]]:
         problems.append((("geometry", "depth"),
                          f"expected the model's bottom below the tunnel's invert (depth greater than "
                          f"axis_depth + radius = {_g(g.axis_depth + g.radius)}), found depth {_g(g.depth)}"))
+    for field, value, cap in (("radius", g.radius, MAX_RADIUS), ("width", g.width, MAX_SIZE),
+                              ("depth", g.depth, MAX_SIZE)):
+        if value > cap:
+            problems.append((("geometry", field), f"expected at most {cap:g} m (lengths are in metres), "
+                                                  f"found {field} {_g(value)}"))
+    if g.radius < 1e-5 * max(g.width, g.depth) * (1 - 1e-9):
+        problems.append((("geometry", "radius"),
+                         f"expected a radius of at least 1e-5 times the model's size ({_g(1e-5 * max(g.width, g.depth))}), "
+                         f"found {_g(g.radius)}: the mesher cannot resolve a tunnel that small"))
     layers = case.ground.layers
     if layers[0].top != 0:
         problems.append((("ground", "layers", 0, "top"),
@@ -373,6 +456,10 @@ def physical_problems(case: Case) -> list[tuple[tuple, str]]:
             problems.append((("ground", "layers", i, "top"),
                              f"expected the layer's top above the model's bottom (less than depth {_g(g.depth)}), "
                              f"found top {_g(layers[i].top)}"))
+        elif min(layers[i].top - layers[i - 1].top, g.depth - layers[i].top) < 1e-6 * g.depth:
+            problems.append((("ground", "layers", i, "top"),
+                             f"expected layers at least {_g(1e-6 * g.depth)} thick (1e-6 of the model's depth), "
+                             f"found top {_g(layers[i].top)} within that of the next boundary"))
     names = [layer.name for layer in layers]
     for i, n in enumerate(names):
         if names.index(n) != i:
@@ -389,6 +476,38 @@ def physical_problems(case: Case) -> list[tuple[tuple, str]]:
                              f"expected unique instrument names, found '{n}' again (as in instruments[{inames.index(n)}])"))
     for i, ins in enumerate(case.instruments):
         problems.extend(_instrument_problems(g, i, ins))
+        if ins.kind in ("inclinometer", "sliding_micrometer", "extensometer", "deflectometer"):
+            n, field = _station_count(ins)
+            if n > MAX_STATIONS:
+                problems.append((("instruments", i, field),
+                                 f"expected at most {MAX_STATIONS} stations, found {n}"))
+                continue
+            length = _line_length(ins)
+            reach = sum(ins.lengths) if ins.lengths is not None else n * ins.spacing
+            if reach > length * (1 + 1e-9):
+                problems.append((("instruments", i, field),
+                                 f"expected the stations within the instrument's length {_g(length)} m, found "
+                                 f"them reaching {_g(reach)} m from the reference end"))
+                continue
+        bad = _covariance_problem(ins)
+        if bad:
+            problems.append((("instruments", i, bad[0]), bad[1]))
+    for field in ("size_tunnel", "size_far", "size_instruments"):
+        size = getattr(case.mesh, field)
+        if size is not None and size < 1e-4 * g.radius:
+            problems.append((("mesh", field), f"expected an element size of at least 1e-4 times the radius "
+                                              f"({_g(1e-4 * g.radius)}), found {_g(size)}"))
+    if case.mesh.size_tunnel is not None and case.mesh.size_tunnel > g.radius:
+        problems.append((("mesh", "size_tunnel"),
+                         f"expected an element size at the wall of at most the radius {_g(g.radius)} "
+                         f"(else the tunnel is not round), found {_g(case.mesh.size_tunnel)}"))
+    estimate = _mesh_estimate(case)
+    if sum(estimate.values()) > MAX_ELEMENTS:
+        worst = max(estimate, key=estimate.get)
+        problems.append((("mesh", worst),
+                         f"expected mesh sizes giving at most about {MAX_ELEMENTS:,} elements, found sizes "
+                         f"giving about {sum(estimate.values()):,.0f} (mostly from {worst} "
+                         f"{_g(getattr(case.mesh, worst) or 0) if getattr(case.mesh, worst) else '(default)'})"))
     for i, p in enumerate(case.parameters):
         if p.bounds is not None:
             lo, hi = p.bounds
@@ -419,9 +538,10 @@ _KINDS = {"points": PointsInstrument, "inclinometer": Inclinometer, "sliding_mic
 _CHILDREN: dict = {Case: {"geometry": Geometry, "ground": Ground, "mesh": MeshSettings, "instruments": "instrument",
                           "parameters": Parameter, "fit": FitSettings, "output": Output},
                    Ground: {"layers": Layer}, Parameter: {"prior": Prior}}
-_PATTERNS = {Case.model_fields["name"]: "a name of letters, digits, '_', '-' or '.' (no spaces)",
-             Layer.model_fields["name"]: "a name starting with a letter or '_', then letters, digits, '_' or '-'",
-             Parameter.model_fields["name"]: "a parameter name such as E, K0, E[layer] or B[instrument]"}
+_PATTERNS = {r"^[A-Za-z0-9_\-.]+$": "a name of letters, digits, '_', '-' or '.' (no spaces)",
+             r"^[A-Za-z_][A-Za-z0-9_\-]*$": "a name starting with a letter or '_', then letters, digits, '_' or '-'",
+             r"^[A-Za-z_][A-Za-z0-9_]*(\[[A-Za-z0-9_\-.]+\])?$":
+                 "a parameter name such as E, K0, E[layer] or B[instrument]"}
 _PAIRS = {"start": "[x, y]", "end": "[x, y]", "bounds": "[lower, upper]"}
 
 
@@ -433,14 +553,19 @@ def _model_at(at: tuple, data: Any):
             node = node[part] if isinstance(node, list) and 0 <= part < len(node) else None
             continue
         if model == "instrument":
-            model = _KINDS.get(node.get("kind")) if isinstance(node, dict) else None
+            model = _instrument_model(node)
         model = _CHILDREN.get(model, {}).get(part)
         if model is None:
             return None
         node = node.get(part) if isinstance(node, dict) else None
     if model == "instrument":
-        model = _KINDS.get(node.get("kind")) if isinstance(node, dict) and isinstance(node.get("kind"), str) else None
+        model = _instrument_model(node)
     return model
+
+
+def _instrument_model(node: Any):
+    kind = node.get("kind") if isinstance(node, dict) else None
+    return _KINDS.get(kind) if isinstance(kind, str) else None
 
 
 def _clean_loc(loc: tuple, data: Any) -> tuple:
@@ -490,8 +615,7 @@ def _expected(err: dict, at: tuple, data: Any) -> str:
         model = _model_at(at, data)
         return f"a mapping of fields ({_fields_text(model)})" if model else "a mapping of fields"
     if t == "string_pattern_mismatch":
-        field = _field_info(at, data)
-        return _PATTERNS.get(field, f"text matching {ctx.get('pattern')}") if field else f"text matching {ctx.get('pattern')}"
+        return _PATTERNS.get(ctx.get("pattern"), f"text matching {ctx.get('pattern')}")
     if t in ("tuple_type", "too_long", "too_short") and at and at[-1] in _PAIRS:
         return f"2 values {_PAIRS[at[-1]]}"
     if t == "too_short":
@@ -543,10 +667,10 @@ def _describe(err: dict, data: Any) -> tuple[tuple, str]:
     if t == "missing":
         field = _field_info(at, data)
         what = f" ({field.description})" if field is not None and field.description else ""
-        have = ", ".join(str(k) for k in found) if isinstance(found, dict) and found else "no fields"
+        have = ", ".join(printable(k) for k in found) if isinstance(found, dict) and found else "no fields"
         return at, f"expected the required field '{at[-1]}'{what}, found it missing (given: {have})"
     if t == "extra_forbidden":
-        key = str(at[-1])
+        key = printable(at[-1])
         model = _model_at(at[:-1], data)
         allowed = _fields_text(model) if model else ""
         close = difflib.get_close_matches(key, list(model.model_fields) if model else [], n=1, cutoff=0.6)
@@ -616,7 +740,12 @@ def case_from_data(data: Any, marks: dict | None = None, file: str | None = None
     try:
         case = Case.model_validate(data)
     except ValidationError as exc:
-        at, message, more = _pick(exc.errors(), data, marks)
+        try:
+            at, message, more = _pick(exc.errors(), data, marks)
+        except Exception:  # pragma: no cover - the plain pydantic wording is better than a crash
+            err = exc.errors()[0]
+            at = _clean_loc(tuple(err["loc"]), data)
+            message, more = err["msg"].replace("Input should be", "expected"), len(exc.errors()) - 1
         line, col = locate(at, marks)
         raise CaseError(message + _more(more), file=file, line=line, column=col,
                         field=format_path(at)) from None

@@ -93,7 +93,7 @@ def _construct(node, at: Path_, marks, loader, file, mark, active: set):
                 key = key_node.value  # `null:`, `yes:`, `1:` are names here, as written
             if key in out:
                 first = marks.get(at + (key,))
-                raise CaseError(f"duplicate key '{key}': expected each key once per mapping, found it again"
+                raise CaseError(f"duplicate key '{printable(key)}': expected each key once per mapping, found it again"
                                 + (f" (first on line {first[0]})" if first else ""),
                                 file=file, line=key_mark[0], column=key_mark[1],
                                 field=format_path(at + (key,)))
@@ -233,6 +233,12 @@ def _path_at_error(text: str, mark, use_context: bool) -> Path_ | None:
     return f["path"]
 
 
+def printable(text: Any) -> str:
+    """Text safe for a one-line message: control characters and line breaks escaped."""
+    text = str(text)
+    return text if text.isprintable() else repr(text)[1:-1]
+
+
 def format_path(at: Path_) -> str:
     """('instruments', 0, 'radius') -> 'instruments[0].radius'."""
     text = ""
@@ -240,7 +246,7 @@ def format_path(at: Path_) -> str:
         if isinstance(part, int) and not isinstance(part, bool):
             text += f"[{part}]"
         else:
-            text += ("." if text else "") + str(part)
+            text += ("." if text else "") + printable(part)
     return text or "(top level)"
 
 
