@@ -67,9 +67,9 @@ def _out_dir(loaded, out: Optional[Path]) -> Path:
 @friendly
 def validate(case: Path = typer.Argument(..., help="case file (YAML)")):
     """Check a case file: schema, physics and instrument positions."""
+    loaded = _load(case)  # schema errors first: no heavy imports before them
     from .problem import Problem
 
-    loaded = _load(case)
     problem = Problem(loaded)
     typer.echo(f"{case}: valid ({len(loaded.case.instruments)} instruments, {problem.obs.m} readings, "
                f"{len(loaded.case.parameters)} parameters, {problem.fe.ndof} dofs)")
@@ -169,12 +169,12 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="print only the final line"),
         as_json: bool = typer.Option(False, "--json", help="print summary.json to stdout")):
     """Identify the case's parameters by maximum likelihood and write all results."""
+    if method is not None and method not in ("lm", "lm-scaled", "gn"):
+        raise GeobackError(f"--method must be lm, lm-scaled or gn, not '{method}'")
+    loaded = _load(case)  # schema errors first: no heavy imports before them
     from .identify import run_case
     from .report import report_text, summary
 
-    if method is not None and method not in ("lm", "lm-scaled", "gn"):
-        raise GeobackError(f"--method must be lm, lm-scaled or gn, not '{method}'")
-    loaded = _load(case)
     folder = _out_dir(loaded, out)
     names = [p.name for p in loaded.case.parameters]
 

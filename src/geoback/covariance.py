@@ -18,7 +18,7 @@ formulas so that they can be checked against ``sigma^2 W W^t + G diag(var) G^t``
 (eqn 26).  The deflectometer uses the ERRATA-corrected eqns 18-20
 (``/work/shared/paper/ERRATA.md``): the printed inner sums are wrong.
 
-Pure numpy; no other geoback imports.
+Pure numpy (and geoback's error classes).
 """
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ import numbers
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+
+from .errors import GeobackError
 
 __all__ = [
     "KINDS",
@@ -64,7 +66,7 @@ _CONSTANTS = {
 }
 
 
-class NotPositiveDefinite(ValueError):
+class NotPositiveDefinite(GeobackError, ValueError):
     """A covariance matrix is not symmetric positive definite."""
 
 

@@ -99,7 +99,12 @@ def build_mesh(case: Case, use_cache: bool = True) -> Mesh:
                             z["tunnel_edges"], key)
         except (OSError, KeyError, ValueError):
             pass  # a damaged cache entry is rebuilt
-    mesh = _run_gmsh(inputs, key)
+    try:
+        mesh = _run_gmsh(inputs, key)
+    except Exception as exc:  # gmsh and OpenCASCADE raise plain exceptions
+        from .errors import GeobackError
+
+        raise GeobackError(f"gmsh could not mesh this geometry ({exc}); check the geometry and mesh sizes") from None
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
