@@ -7,15 +7,13 @@ Closed form (DESIGN.md): u_r = -p0 R / (4G) [(1 + K0) - (1 - K0)(3 - 4 nu) cos 2
 Two refinement series, each five meshes (four halvings):
 
   A "size_tunnel"  size_tunnel = R/4 ... R/64, size_far = L/10 fixed, the library's grading
-                   (element size h(d) = size_tunnel + GROWTH d, GROWTH = 0.25 in geoback.mesh).
+                   (element size h(d) = size_tunnel + growth d, mesh.growth = 0.25 by default).
                    Only the elements within a few size_tunnel of the wall get finer: the error
                    soon stalls at the discretisation error of the graded zone (~1e-4), which
                    this series never refines.
-  B "uniform"      size_tunnel = R/2 ... R/32 and GROWTH = 0.5 ... 1/32 halved together, so the
-                   element size halves everywhere (up to size_far = L/10, where the Kirsch field
-                   is ~(R/r)^2 < 1e-4 of its wall value): a true h-refinement. GROWTH is a module
-                   constant of geoback.mesh, not part of the case; the study sets it for these
-                   meshes only and meshes without the cache (GROWTH is not in the cache key).
+  B "uniform"      size_tunnel = R/2 ... R/32 and mesh.growth = 0.5 ... 1/32 halved together, so
+                   the element size halves everywhere (up to size_far = L/10, where the Kirsch
+                   field is ~(R/r)^2 < 1e-4 of its wall value): a true h-refinement.
 
 Expected rate. P2 isoparametric triangles (curved along the wall, exact quadrature of the
 load): the energy-norm error is O(h^2) and the L2 displacement error O(h^3); a point value on
@@ -37,7 +35,6 @@ L = 1e6 R, "Cannot reparametrize a mesh node in high order meshing".)
 """
 from __future__ import annotations
 
-import contextlib
 import csv
 import math
 import sys
@@ -70,27 +67,15 @@ def exact_ur(theta):
     return -P0 * R / (4 * G) * ((1 + K0) - (1 - K0) * (3 - 4 * NU) * np.cos(2 * theta))
 
 
-@contextlib.contextmanager
-def grading(growth):
-    old = gmesh.GROWTH
-    if growth is not None:
-        gmesh.GROWTH = growth
-    try:
-        yield
-    finally:
-        gmesh.GROWTH = old
-
-
 def run(size_tunnel: float, growth) -> dict:
     case = case_from_data(dict(
         name="kirsch-convergence",
         geometry=dict(radius=R, axis_depth=L, width=L, depth=2 * L),
         ground=dict(unit_weight=1.0, K0=K0, layers=[dict(name="rock", top=0.0, E=E, nu=NU)]),
-        mesh=dict(size_tunnel=size_tunnel, size_far=SIZE_FAR),
+        mesh=dict(size_tunnel=size_tunnel, size_far=SIZE_FAR, **({"growth": growth} if growth else {})),
     ))
     t0 = time.perf_counter()
-    with grading(growth):
-        mesh = gmesh.build_mesh(case, use_cache=False)
+    mesh = gmesh.build_mesh(case, use_cache=False)
     fe = FEModel(mesh, L, 2 * L, (0.0, -L), R)
     fact = Factorisation(fe.matrix(np.tile(plane_strain_isotropic(E, NU), (fe.ne, 1))))
     sv = np.full(len(fe.wall_points), -P0)

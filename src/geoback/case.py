@@ -132,6 +132,8 @@ class MeshSettings(Strict):
     size_far: Optional[Positive] = Field(None, description="element size far from the tunnel [m] (default domain/12)")
     size_instruments: Optional[Positive] = Field(None, description="element size along instruments [m] (default: no refinement)")
     order: Annotated[Literal[1, 2], BeforeValidator(_whole)] = Field(2, description="element order: 2 = quadratic triangles")
+    growth: Annotated[float, BeforeValidator(_number), Field(gt=0.01, le=2.0)] = Field(
+        0.25, description="element size grows by this fraction of the distance from the tunnel (and instruments)")
 
 
 class _Instrument(Strict):
@@ -349,7 +351,6 @@ MAX_RADIUS = 1e3  # m: gmsh's geometry kernel fails on larger tunnels (and none 
 MAX_SIZE = 1e5  # m: width and depth of the model
 MAX_STATIONS = 2_000  # stations per instrument: its covariance matrix is dense
 MAX_ELEMENTS = 1_000_000  # estimated triangles of the mesh: beyond this gmsh and the solver take far too long
-_GROWTH = 0.25  # as geoback.mesh.GROWTH: element size grows by this fraction of the distance from the wall
 
 
 def _line_length(ins) -> float:
@@ -408,14 +409,15 @@ def _mesh_estimate_(case: Case) -> dict[str, float]:
     t = m.size_tunnel or g.radius / 8
     far = m.size_far or max(g.width, g.depth) / 12
     k = 2.31  # triangles per h^2 of area (equilateral)
+    growth = m.growth
     out = {"size_far": k * g.width * g.depth / (far * far), "size_tunnel": 0.0, "size_instruments": 0.0}
     if far > t:  # graded ring around the wall: integral of 1/h^2 over the half annulus
-        out["size_tunnel"] = k * math.pi / _GROWTH * ((g.radius - t / _GROWTH) * (1 / t - 1 / far)
-                                                      + math.log(far / t) / _GROWTH)
+        out["size_tunnel"] = k * math.pi / growth * ((g.radius - t / growth) * (1 / t - 1 / far)
+                                                      + math.log(far / t) / growth)
     si = m.size_instruments
     if si and far > si:
         points = sum(len(ins.points) if ins.kind in ("points", "convergence") else 25 for ins in case.instruments)
-        out["size_instruments"] = points * k * 2 * math.pi * (0.5 + math.log(far / si) / _GROWTH ** 2)
+        out["size_instruments"] = points * k * 2 * math.pi * (0.5 + math.log(far / si) / growth ** 2)
     return out
 
 

@@ -12,8 +12,7 @@ import numpy as np
 
 from .case import Case
 
-MESH_FORMAT = 3  # bump when the meshing procedure changes, to invalidate caches
-GROWTH = 0.25  # element size grows by this fraction of the distance from the tunnel
+MESH_FORMAT = 4  # bump when the meshing procedure changes, to invalidate caches
 
 
 @dataclass(frozen=True)
@@ -50,6 +49,7 @@ def mesh_inputs(case: Case) -> dict:
         "size_instruments": m.size_instruments,
         "instrument_points": instrument_refinement_points(case) if m.size_instruments else [],
         "order": m.order,
+        "growth": m.growth,
     }
 
 
@@ -159,7 +159,7 @@ def _run_gmsh(inputs: dict, key: str) -> Mesh:
         fields.setNumber(2, "SizeMax", inputs["size_far"])
         # element size grows linearly away from the wall (graded mesh, ~log(domain/R) elements)
         fields.setNumber(2, "DistMin", 0.0)
-        fields.setNumber(2, "DistMax", (inputs["size_far"] - inputs["size_tunnel"]) / GROWTH)
+        fields.setNumber(2, "DistMax", (inputs["size_far"] - inputs["size_tunnel"]) / inputs["growth"])
         background = [2]
         if inputs["instrument_points"]:
             pts = [occ.addPoint(x, y, 0) for x, y in inputs["instrument_points"]]
@@ -171,7 +171,7 @@ def _run_gmsh(inputs: dict, key: str) -> Mesh:
             fields.setNumber(4, "SizeMin", inputs["size_instruments"])
             fields.setNumber(4, "SizeMax", inputs["size_far"])
             fields.setNumber(4, "DistMin", inputs["size_instruments"])
-            fields.setNumber(4, "DistMax", inputs["size_instruments"] + (inputs["size_far"] - inputs["size_instruments"]) / GROWTH)
+            fields.setNumber(4, "DistMax", inputs["size_instruments"] + (inputs["size_far"] - inputs["size_instruments"]) / inputs["growth"])
             background.append(4)
         fields.add("Min", 10)
         fields.setNumbers(10, "FieldsList", background)
