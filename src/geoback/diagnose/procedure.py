@@ -25,6 +25,9 @@ from ..identify import reliability_of
 from .hypotheses import Hypothesis, candidate_hypotheses
 
 COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mimic
+DEPTH_SEEDS = 7  # layer-boundary depths refitted evenly over a layer before bisection
+REFIT_ITERATIONS = 100
+STALLED = 0.01  # a refit whose J fell by less than this in its last step has stopped moving
 
 
 @dataclass
@@ -63,6 +66,8 @@ class Round:
     mismatches: list[Mismatch]
     ranking: list[Scored]
     accepted: Scored | None
+    adequate: bool = False  # chi^2 test passed and no hypothesis' score test is significant
+    threshold: float = float("nan")  # per-hypothesis level alpha / K (Bonferroni over the library)
 
 
 @dataclass
@@ -80,17 +85,17 @@ class Diagnosis:
 
     @property
     def adequate_before(self) -> bool:
-        return self.baseline_reliability.p_value >= self.alpha
+        return self.rounds[0].adequate
 
     @property
     def adequate_after(self) -> bool:
-        return self.final_reliability.p_value >= self.alpha
+        return self.rounds[-1].adequate
 
 
 # ---------------------------------------------------------------------------------------------
-def _fit_and_assess(problem, method, weighting):
+def _fit_and_assess(problem, method, weighting, max_iterations=None):
     objective = Objective(problem, weighting)
-    res = fit(problem, method=method, weighting=weighting)
+    res = fit(problem, method=method, weighting=weighting, max_iterations=max_iterations)
     return res, reliability_of(problem, res, objective), objective
 
 
@@ -206,13 +211,40 @@ def _specs(problem, p: np.ndarray) -> list[Parameter]:
 
 
 def _best_of_groups(scored: list[Scored]) -> list[Scored]:
-    """One entry per group (the layer-boundary depth with the largest score)."""
+    """One entry per group (the layer-boundary depth with the largest score, its p-value
+    multiplied by the number of depths searched: Bonferroni within the group)."""
     best: dict[str, Scored] = {}
+    size: dict[str, int] = {}
     for s in scored:
         g = s.hypothesis.group or s.hypothesis.key
+        size[g] = size.get(g, 0) + 1
         if g not in best or s.score > best[g].score:
             best[g] = s
+    for g, s in best.items():
+        s.p_score = min(1.0, s.p_score * size[g])
     return sorted(best.values(), key=lambda s: (s.p_score, -s.score))
+
+
+def _settled(f: Fit) -> bool:
+    """Converged, or stopped by the iteration limit while J no longer moves."""
+    if f.status == "converged":
+        return True
+    Js = [h.J for h in f.history if h.accepted]
+    return len(Js) >= 2 and Js[-2] - Js[-1] < STALLED
+
+
+def _choose(significant: list[Scored]) -> Scored | None:
+    """Lowest AIC; a hypothesis with a searched depth must beat the others by more than 2 AIC
+    (within 2 the data cannot tell them apart and the simpler search-free one is kept)."""
+    if not significant:
+        return None
+    best = min(significant, key=lambda s: s.aic)
+    plain = [s for s in significant if not s.hypothesis.group]
+    if best.hypothesis.group and plain:
+        rival = min(plain, key=lambda s: s.aic)
+        if rival.aic - best.aic < 2.0:
+            return rival
+    return best
 
 
 def _compare(s: Scored, J0: float, searched: int) -> None:
@@ -275,12 +307,16 @@ def _refit_layer_boundary(current, cur_fit: Fit, group: list[Scored], method: st
                          f"boundary, meshed as a new layer '{layer}_below').",
                          [Parameter(name=f"E[{layer}_below]", initial=E0)], {key: z}, group=h.group)
         t = Scored(hyp, template.score, template.dof, template.p_score, problem=problem)
-        t.refit, t.reliability, _ = _fit_and_assess(problem, method, weighting)
+        t.refit, t.reliability, _ = _fit_and_assess(problem, method, weighting, REFIT_ITERATIONS)
         _compare(t, cur_fit.J, 1)
         tried[z] = t
 
+    # the score is a linear approximation that can overrate deep boundaries: besides the three
+    # best-scored depths, seed refits evenly over the layer, then bisect around the best
     for t in group[:3]:
         attempt(t.hypothesis.extra_values[key], t)
+    for z in np.linspace(lo_z, hi_z, DEPTH_SEEDS + 2)[1:-1]:
+        attempt(min(depths, key=lambda d: abs(d - z)), by_depth[min(depths, key=lambda d: abs(d - z))])
     for width in (step / 2, step / 4):
         best_z = min(tried, key=lambda z: tried[z].refit.J)
         nearest = by_depth[min(by_depth, key=lambda d: abs(d - best_z))]
@@ -306,33 +342,38 @@ def diagnose(loaded, problem=None, alpha: float = 0.05, max_rounds: int = 2, ref
     current, cur_fit, cur_rel = problem, base_fit, base_rel
     rounds: list[Round] = []
     accepted: list[Scored] = []
-    for _ in range(max_rounds):
+    for k in range(max_rounds + 1):
         mismatches = locate(current, cur_fit, cur_rel)
-        if cur_rel.p_value >= alpha or cur_rel.dof <= 0:
-            rounds.append(Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, [], None))
+        if cur_rel.dof <= 0:
+            rounds.append(Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, [], None, True))
             break
-        hyps = [h for h in candidate_hypotheses(current, cur_fit.p)]
+        hyps = candidate_hypotheses(current, cur_fit.p)
         say(f"scoring {len(hyps)} hypotheses")
-        scored = score_hypotheses(current, cur_fit.p, hyps, weighting)
-        ranking = _best_of_groups(scored)
-        candidates = [s for s in ranking if s.collinear_with is None][:refit_top]
-        for s in candidates:
+        ranking = _best_of_groups(scored := score_hypotheses(current, cur_fit.p, hyps, weighting))
+        testable = [s for s in ranking if s.collinear_with is None]
+        threshold = alpha / max(len(testable), 1)
+        # adequate: the omnibus chi^2 test passes and no targeted alternative is significant
+        adequate = cur_rel.p_value >= alpha and all(s.p_score >= threshold for s in testable)
+        rnd = Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, ranking, None, adequate, threshold)
+        rounds.append(rnd)
+        if adequate or k == max_rounds:
+            break
+        for s in testable[:refit_top]:
             if s.hypothesis.group:
                 group = sorted((t for t in scored if t.hypothesis.group == s.hypothesis.group), key=lambda t: -t.score)
                 winner = _refit_layer_boundary(current, cur_fit, group, method, weighting, say)
+                winner.p_score = s.p_score
                 ranking[ranking.index(s)] = winner
                 continue
             say(f"refitting with {s.hypothesis.title}")
-            s.refit, s.reliability, _ = _fit_and_assess(s.problem, method, weighting)
+            s.refit, s.reliability, _ = _fit_and_assess(s.problem, method, weighting, REFIT_ITERATIONS)
             _compare(s, s.J0, 0)
-        refitted = [s for s in ranking if s.refit is not None]
-        threshold = alpha / max(len(refitted), 1)
-        significant = [s for s in refitted if s.p_lr < threshold and s.refit.status == "converged"]
-        choice = min(significant, key=lambda s: s.aic) if significant else None
-        rounds.append(Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, ranking, choice))
-        if choice is None:
+        significant = [s for s in ranking if s.refit is not None and s.p_lr < threshold and _settled(s.refit)]
+        rnd.accepted = _choose(significant)
+        if rnd.accepted is None:
+            rnd.adequate = cur_rel.p_value >= alpha  # nothing in the library does better
             break
-        accepted.append(choice)
-        current, cur_fit, cur_rel = choice.problem, choice.refit, choice.reliability
+        accepted.append(rnd.accepted)
+        current, cur_fit, cur_rel = rnd.accepted.problem, rnd.accepted.refit, rnd.accepted.reliability
     return Diagnosis(loaded.case.name, alpha, rounds, base_fit, base_rel, cur_fit, cur_rel, current, problem,
                      accepted)

@@ -26,8 +26,11 @@ def verdict(d) -> str:
     """The plain-words answer."""
     b = d.baseline_reliability
     if d.adequate_before:
-        return (f"The model is adequate: {_fit_line(b.chi2, b.dof, b.p_value)} - the readings are explained within "
-                f"their stated errors. Nothing is missing.")
+        best = next((s for s in d.rounds[0].ranking if s.collinear_with is None), None)
+        extra = (f", and no hypothesis of the library improves it significantly (best: {best.hypothesis.title}, "
+                 f"score-test p = {best.p_score:.2g} against the level {d.rounds[0].threshold:.2g})") if best else ""
+        return (f"The model is adequate: {_fit_line(b.chi2, b.dof, b.p_value)}{extra} - the readings are explained "
+                f"within their stated errors. Nothing is missing.")
     if not d.accepted:
         return (f"The model does not explain the readings ({_fit_line(b.chi2, b.dof, b.p_value)}), but none of the "
                 f"hypotheses in the library improves the fit significantly. Check the readings and their stated "
@@ -49,10 +52,11 @@ def diagnosis_text(d) -> str:
     lines = [f"# geoback diagnosis: {d.case}", "", verdict(d), ""]
     for k, rnd in enumerate(d.rounds, 1):
         lines += [f"## Round {k}", "", f"- fit: {_fit_line(rnd.chi2, rnd.dof, rnd.p_value)}"]
-        if rnd.p_value >= d.alpha:
-            lines += ["- adequate at the 5 % level: stop", ""]
-            continue
-        lines += ["- where the model and the readings differ:"] + [f"  - {m.text}" for m in rnd.mismatches[:4]]
+        if rnd.adequate and rnd.accepted is None:
+            lines += [f"- adequate: the χ² test passes at the {100 * d.alpha:g} % level and no hypothesis' score test "
+                      f"is significant at {rnd.threshold:.2g} (= {d.alpha:g} / number of hypotheses); stop"]
+        else:
+            lines += ["- where the model and the readings differ:"] + [f"  - {m.text}" for m in rnd.mismatches[:4]]
         if rnd.ranking:
             lines += ["", "| hypothesis | score S | p (score) | ΔJ | p (LR) | AIC | BIC | estimate |",
                       "|---|---|---|---|---|---|---|---|"]

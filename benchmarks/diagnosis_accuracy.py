@@ -1,0 +1,418 @@
+"""Accuracy of `geoback diagnose` on randomised concealed-physics cases and on null cases.
+
+Each case is a random tunnel (radius, depth, domain, E, nu, K0), a random instrument layout
+(one or two inclinometers I1[, I2] beside the tunnel, an extensometer X1 above the crown,
+optionally surface settlement points S) with realistic sigma's, and - for a concealed case - one
+effect of random kind and magnitude that the case's (baseline) model lacks:
+
+  stiffness-gradient    Egrad[clay] = g, g log-uniform in (0.2, 3) x E/30 per m
+  layer-boundary        a real layer 'sand' (E2/E log-uniform in (1.5, 4), same nu) below a depth
+                        uniform in (axis + R + 2, axis + 12) m, meshed conforming
+  anisotropy            n[clay] log-uniform in (1.1, 2)
+  K0-gradient           K0grad = +-k, k log-uniform in (0.01, 0.08) per m
+  integration-constant  the toe of inclinometer I1 moved: B[I1] = +-b, b log-uniform in (1, 8) mm
+  stress-release        beta = 1 - d, d log-uniform in (0.05, 0.4), with a prior on E in the case
+                        (mean = true E, std 5 %: without it beta is not separable from E)
+  null                  nothing (noise only)
+
+Readings are those of the truth on a mesh twice as fine (geoback.simulate.synthetic_readings,
+refine = 2) with noise drawn from each instrument's C_x (random seed); the case given to
+`diagnose` describes only the baseline model (E and K0 identified). Everything is drawn from
+one master seed (--seed), so the benchmark is reproducible.
+
+Effect size (the definition the floor uses): the baseline model is fitted to the truth's
+NOISE-FREE readings; effect size = sqrt(J_min) in sigma units - the part of the effect the
+baseline parameters cannot absorb (sqrt of the non-centrality of chi^2 at the baseline optimum;
+it also contains the baseline mesh's discretisation error, which the null cases show).
+Raw movement (the issue's literal wording, printed as well): max_i |x_truth_i - x_base_i| / sigma_i,
+both noise-free on the fine mesh, x_base with the true baseline values and no effect, sigma_i the
+standard deviation of reading i (sqrt diag C_x).
+
+A case's answer is the kind of the FIRST accepted hypothesis ('nothing' if none is accepted);
+correct when it equals the truth kind ('integration-constant' for a moved toe). A null case is a
+false alarm when anything is accepted. Floors (issue): >= 90 % correct names among concealed
+cases with effect size > 3; <= 5 % false alarms on null cases.
+
+    python benchmarks/diagnosis_accuracy.py [--concealed 60] [--null 30] [--seed 2024]
+        [--workers 2] [--out benchmarks/out/diagnosis_accuracy.csv] [--show INDEX]
+
+Printed: one progress line per case, then the confusion matrix (rows = truth kind incl. null,
+columns = named kind incl. 'nothing') for all cases, for effect size > 3 and for raw movement > 3
+sigma, the accuracy above the threshold (and per effect-size band), the false-alarm rate with its
+binomial standard error, total time and the median seconds per diagnose (the diagnose call only:
+meshing and the truth's forward runs excluded). The exit status is 1 when a floor is missed.
+CSV (one row per case): truth kind, its parameter and magnitude, effect size, raw movement, named
+kind, correct, every accepted hypothesis, the first one's estimate, round 1's refitted hypotheses
+with dJ and AIC (':NC' = refit not converged), p-value of chi^2 before, chi^2/dof before and
+after, the best-scored kind of round 1, number of readings, seconds, and the case's draw.
+--show INDEX reruns one case in this process and prints its diagnosis (diagnosis.md text).
+Meshes go to a temporary cache (GEOBACK_CACHE), removed at the end, unless --mesh-cache is given.
+"""
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ[_var] = "1"  # one thread per worker process (set before numpy is imported)
+
+import argparse  # noqa: E402
+import copy  # noqa: E402
+import csv  # noqa: E402
+import math  # noqa: E402
+import shutil  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_OUT = ROOT / "benchmarks" / "out" / "diagnosis_accuracy.csv"
+KINDS = ["stiffness-gradient", "layer-boundary", "anisotropy", "K0-gradient", "integration-constant",
+         "stress-release"]
+THRESHOLD = 3.0  # sigma
+FLOOR_ACCURACY, FLOOR_FALSE_ALARMS = 0.90, 0.05
+COLUMNS = ["case", "kind", "parameter", "magnitude", "effect_size", "raw_movement", "named", "correct",
+           "accepted", "estimate", "round1", "p_before", "chi2dof_before", "chi2dof_after", "top_score_kind",
+           "readings", "seconds", "R", "axis_depth", "E", "nu", "K0", "layout", "noise_seed", "error"]
+
+
+def _loguniform(rng, lo: float, hi: float) -> float:
+    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+
+# ------------------------------------------------------------------------------------------ cases
+def random_case(index: int, kind: str, master_seed: int) -> dict:
+    """The case data (baseline model, no readings), the truth's extras and the noise seed."""
+    rng = np.random.default_rng([master_seed, index])
+    R = float(rng.uniform(2.0, 4.0))
+    zc = float(rng.uniform(2.5 * R, 5.0 * R))
+    width = round(15.0 * R, 2)
+    depth = round(zc + 25.0, 2)
+    E = _loguniform(rng, 5000.0, 50000.0)
+    nu = float(rng.uniform(0.2, 0.45))
+    K0 = float(rng.uniform(0.5, 1.5))
+    gamma = float(rng.uniform(18.0, 21.0))
+
+    instruments = []
+    n_incl = int(rng.integers(1, 3))
+    xs = sorted(rng.uniform(R + 1.5, R + 6.0, n_incl))
+    if n_incl == 2 and xs[1] - xs[0] < 1.0:
+        xs[1] = xs[0] + 1.0
+    layout = []
+    for j, x in enumerate(xs):
+        toe = float(min(rng.uniform(zc + R + 4.0, zc + R + 12.0), depth - 1.0))
+        stations = int(rng.integers(12, 21))
+        spacing = round(toe / (stations + 0.5), 3)
+        instruments.append({"name": f"I{j + 1}", "kind": "inclinometer", "x": round(float(x), 3),
+                            "toe_depth": round(toe, 3), "spacing": spacing, "stations": stations,
+                            "sigma": round(float(rng.uniform(0.0002, 0.0005)), 6)})
+        layout.append(f"I{j + 1}@x{x:.1f}/{stations}")
+    length = zc - R - 0.5
+    ext_spacing = 1.0 if length >= 4.0 else round(length / 4.0, 3)
+    n_ext = max(int(math.floor(length / ext_spacing + 1e-9)), 1)
+    instruments.append({"name": "X1", "kind": "extensometer", "start": [0.0, 0.0], "end": [0.0, -round(length, 3)],
+                        "spacing": ext_spacing, "stations": n_ext,
+                        "sigma": round(float(rng.uniform(0.0001, 0.0003)), 6), "var_a": 1.0e-8})
+    layout.append(f"X1/{n_ext}")
+    if rng.uniform() < 0.6:
+        n_pts = int(rng.integers(5, 10))
+        xmax = min(width - 1.0, 2.5 * zc)
+        pts = [[round(float(v), 3), 0.0] for v in np.linspace(0.0, xmax, n_pts)]
+        instruments.append({"name": "S", "kind": "points", "points": pts, "components": ["uy"],
+                            "sigma": round(float(rng.uniform(0.0003, 0.001)), 6)})
+        layout.append(f"S/{n_pts}")
+
+    e_prior = None
+    values: dict = {}
+    extra_layer = None
+    parameter, magnitude = "", float("nan")
+    if kind == "stiffness-gradient":
+        parameter, magnitude = "Egrad[clay]", _loguniform(rng, 0.2, 3.0) * E / 30.0
+        values = {parameter: magnitude}
+    elif kind == "layer-boundary":
+        ratio = _loguniform(rng, 1.5, 4.0)
+        z = float(rng.uniform(zc + R + 2.0, zc + 12.0))
+        extra_layer = {"name": "sand", "top": round(z, 3), "E": ratio * E, "nu": nu}
+        parameter, magnitude = f"E2/E (top {z:.2f} m)", ratio
+    elif kind == "anisotropy":
+        parameter, magnitude = "n[clay]", _loguniform(rng, 1.1, 2.0)
+        values = {parameter: magnitude}
+    elif kind == "K0-gradient":
+        parameter, magnitude = "K0grad", float(rng.choice([-1.0, 1.0])) * _loguniform(rng, 0.01, 0.08)
+        values = {parameter: magnitude}
+    elif kind == "integration-constant":
+        parameter, magnitude = "B[I1]", float(rng.choice([-1.0, 1.0])) * _loguniform(rng, 0.001, 0.008)
+        values = {parameter: magnitude}
+    elif kind == "stress-release":
+        parameter, magnitude = "beta", 1.0 - _loguniform(rng, 0.05, 0.4)
+        values = {parameter: magnitude}
+        e_prior = {"mean": E, "std": 0.05 * E}
+    elif kind != "null":
+        raise ValueError(kind)
+
+    e_param = {"name": "E", "initial": E * _loguniform(rng, 0.4, 2.5), "bounds": [100.0, 1.0e6]}
+    if e_prior:
+        e_param["prior"] = e_prior
+    data = {
+        "name": f"bench-{index:03d}-{kind}",
+        "geometry": {"radius": round(R, 3), "axis_depth": round(zc, 3), "width": width, "depth": depth},
+        "ground": {"unit_weight": round(gamma, 3), "K0": round(K0, 4),
+                   "layers": [{"name": "clay", "top": 0.0, "E": E, "nu": round(nu, 4)}]},
+        "mesh": {"size_tunnel": round(R / 7.5, 4), "size_far": 5.0},
+        "instruments": instruments,
+        "parameters": [e_param, {"name": "K0", "initial": float(rng.uniform(0.4, 1.6)), "bounds": [0.05, 5.0]}],
+    }
+    noise_seed = int(rng.integers(0, 2**31 - 1))
+    return {"index": index, "kind": kind, "data": data, "values": values, "extra_layer": extra_layer,
+            "parameter": parameter, "magnitude": magnitude, "noise_seed": noise_seed,
+            "R": R, "zc": zc, "E": E, "nu": nu, "K0": K0, "layout": " ".join(layout)}
+
+
+def _stack(readings: dict, problem) -> np.ndarray:
+    return np.concatenate([readings[b.name] for b in problem.obs.blocks])
+
+
+def run_one(spec: dict, folder: str, show: bool = False) -> dict:
+    """Truth readings, effect size, raw movement, and the diagnosis of one case."""
+    from geoback.case import LoadedCase, case_from_data
+    from geoback.diagnose import diagnose
+    from geoback.estimate import fit
+    from geoback.problem import Problem
+    from geoback.simulate import synthetic_readings
+
+    row = {k: "" for k in COLUMNS}
+    row.update(case=spec["data"]["name"], kind=spec["kind"], parameter=spec["parameter"],
+               magnitude=spec["magnitude"], noise_seed=spec["noise_seed"], R=round(spec["R"], 3),
+               axis_depth=round(spec["zc"], 3), E=round(spec["E"], 1), nu=round(spec["nu"], 3),
+               K0=round(spec["K0"], 3), layout=spec["layout"])
+    try:
+        path = Path(folder) / f"{spec['data']['name']}.yaml"
+        loaded = LoadedCase(case_from_data(copy.deepcopy(spec["data"])), path, {})
+        truth_data = copy.deepcopy(spec["data"])
+        if spec["extra_layer"]:
+            truth_data["ground"]["layers"].append(dict(spec["extra_layer"]))
+        truth = LoadedCase(case_from_data(truth_data), path, {})
+
+        noisy = synthetic_readings(truth, refine=2.0, values=spec["values"], noise_seed=spec["noise_seed"])
+        clean = synthetic_readings(truth, refine=2.0, values=spec["values"], noise_seed=None)
+        base_clean = synthetic_readings(loaded, refine=2.0, values=None, noise_seed=None)
+
+        problem = Problem(loaded, with_readings=False)
+        sigma = np.sqrt(np.diag(problem.obs.covariance))
+        x_truth, x_base = _stack(clean, problem), _stack(base_clean, problem)
+        row["raw_movement"] = float(np.max(np.abs(x_truth - x_base) / sigma))
+        row["readings"] = len(x_truth)
+
+        problem.obs.measured = _stack(noisy, problem)
+        t0 = time.perf_counter()
+        d = diagnose(loaded, problem=problem)
+        row["seconds"] = time.perf_counter() - t0
+        if show:
+            from geoback.diagnose import diagnosis_text
+
+            print(diagnosis_text(d))
+
+        problem.obs.measured = x_truth  # noise-free truth: what the baseline cannot absorb
+        row["effect_size"] = float(math.sqrt(max(fit(problem).J, 0.0)))
+
+        kinds = [s.hypothesis.kind for s in d.accepted]
+        named = kinds[0] if kinds else "nothing"
+        row["named"] = named
+        row["accepted"] = " + ".join(s.hypothesis.key for s in d.accepted)
+        row["correct"] = (named == "nothing") if spec["kind"] == "null" else (named == spec["kind"])
+        if d.accepted:
+            s = d.accepted[0]
+            i = s.reliability.names.index(s.hypothesis.names[0])
+            row["estimate"] = f"{s.hypothesis.names[0]}={s.refit.p[i]:.4g}±{s.reliability.std[i]:.2g}"
+            if s.hypothesis.kind == "layer-boundary":
+                row["estimate"] += " z=" + ",".join(f"{v:g}" for v in s.hypothesis.extra_values.values())
+        r0 = d.rounds[0]
+        row["p_before"] = r0.p_value
+        scored = [s for s in r0.ranking if s.collinear_with is None]
+        row["top_score_kind"] = scored[0].hypothesis.kind if scored else ""
+        row["round1"] = " ".join(  # the refitted hypotheses of round 1: key, dJ, AIC, converged?
+            f"{s.hypothesis.key}:dJ={s.dJ:.4g}:AIC={s.aic:.6g}{'' if s.refit.status == 'converged' else ':NC'}"
+            for s in r0.ranking if s.refit is not None)
+        row["chi2dof_before"] = d.baseline_reliability.reduced_chi2
+        row["chi2dof_after"] = d.final_reliability.reduced_chi2
+    except Exception as exc:  # one broken case is reported, not fatal
+        row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")[:300]
+        row["named"] = row["named"] or "error"
+        row["correct"] = False
+    return row
+
+
+# ------------------------------------------------------------------------------------------ output
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}" if math.isfinite(v) else "nan"
+    return str(v)
+
+
+def confusion(rows: list[dict], title: str) -> str:
+    truths = [k for k in KINDS + ["null"] if any(r["kind"] == k for r in rows)]
+    named = KINDS + ["nothing"] + sorted({r["named"] for r in rows} - set(KINDS) - {"nothing"})
+    short = {"stiffness-gradient": "Egrad", "layer-boundary": "layer", "anisotropy": "aniso",
+             "K0-gradient": "K0grad", "integration-constant": "int-const", "stress-release": "beta",
+             "nothing": "nothing", "error": "error"}
+    cols = [c for c in named if c in KINDS + ["nothing"] or any(r["named"] == c for r in rows)]
+    w0 = max(len(t) for t in truths + ["truth \\ named"]) + 1
+    head = "truth \\ named".ljust(w0) + "".join(short.get(c, c).rjust(10) for c in cols) + "   n  correct"
+    lines = [title, head, "-" * len(head)]
+    for t in truths:
+        sub = [r for r in rows if r["kind"] == t]
+        counts = [sum(r["named"] == c for r in sub) for c in cols]
+        ok = sum(bool(r["correct"]) for r in sub)
+        lines.append(t.ljust(w0) + "".join(str(n).rjust(10) for n in counts) + f"{len(sub):4d}  {ok:3d}"
+                     f" ({100 * ok / len(sub):.0f} %)")
+    if not truths:
+        lines.append("(no cases)")
+    return "\n".join(lines)
+
+
+def summary(rows: list[dict], seconds: float) -> tuple[str, bool]:
+    concealed = [r for r in rows if r["kind"] != "null"]
+    nulls = [r for r in rows if r["kind"] == "null"]
+    big = [r for r in concealed if isinstance(r["effect_size"], float) and r["effect_size"] > THRESHOLD]
+    raw = [r for r in concealed if isinstance(r["raw_movement"], float) and r["raw_movement"] > THRESHOLD]
+    out = [
+        "Definitions: effect size = sqrt(J_min) of the BASELINE model fitted to the truth's noise-free "
+        "readings",
+        "(the part of the effect the baseline parameters cannot absorb, in sigma units); raw movement = "
+        "max_i |x_truth - x_base| / sigma_i",
+        "(noise-free, true baseline values). Answer = kind of the first accepted hypothesis; null case: "
+        "false alarm if anything is accepted.",
+        "",
+        confusion(rows, f"Confusion matrix, all cases ({len(rows)}):"),
+        "",
+        confusion(big + nulls, f"Confusion matrix, concealed cases with effect size > {THRESHOLD:g} "
+                               f"({len(big)}) and null cases ({len(nulls)}) - the floor applies here:"),
+        "",
+        confusion(raw + nulls, f"Confusion matrix, concealed cases with raw movement > {THRESHOLD:g} sigma "
+                               f"({len(raw)}) and null cases ({len(nulls)}):"),
+        "",
+    ]
+    ok = True
+
+    def rate(sub):
+        n = len(sub)
+        k = sum(bool(r["correct"]) for r in sub)
+        return (k / n if n else float("nan")), k, n
+
+    acc, k, n = rate(big)
+    if n:
+        passed = acc >= FLOOR_ACCURACY
+        ok &= passed
+        out.append(f"correct names, effect size > {THRESHOLD:g}:    {k}/{n} = {100 * acc:.1f} % "
+                   f"(floor >= {100 * FLOOR_ACCURACY:.0f} %: {'PASS' if passed else 'FAIL'})")
+    else:
+        ok = False
+        out.append(f"correct names, effect size > {THRESHOLD:g}: no such case")
+    acc_r, k_r, n_r = rate(raw)
+    out.append(f"correct names, raw movement > {THRESHOLD:g} sigma: {k_r}/{n_r} = {100 * acc_r:.1f} %")
+    for lo, hi in ((0, 3), (3, 5), (5, 10), (10, 30), (30, math.inf)):
+        sub = [r for r in concealed if isinstance(r["effect_size"], float) and lo < r["effect_size"] <= hi]
+        if sub:
+            a, kk, nn = rate(sub)
+            out.append(f"  effect size in ({lo:g}, {hi:g}]: {kk}/{nn} correct ({100 * a:.0f} %)")
+    if nulls:
+        fa = sum(r["named"] != "nothing" for r in nulls)
+        p = fa / len(nulls)
+        se = math.sqrt(p * (1 - p) / len(nulls))
+        passed = p <= FLOOR_FALSE_ALARMS
+        ok &= passed
+        extra = f", 95 % upper bound {min(100.0, 300 / len(nulls)):.1f} % (rule of three)" if fa == 0 else ""
+        out.append(f"false alarms on null cases:        {fa}/{len(nulls)} = {100 * p:.1f} % ± {100 * se:.1f} % "
+                   f"(binomial s.e.{extra}; floor <= {100 * FLOOR_FALSE_ALARMS:.0f} %: "
+                   f"{'PASS' if passed else 'FAIL'})")
+    errors = [r for r in rows if r["error"]]
+    if errors:
+        ok = False
+        out.append(f"cases that raised: {len(errors)} (see the 'error' column)")
+    null_eff = [r["effect_size"] for r in nulls if isinstance(r["effect_size"], float)]
+    if null_eff:
+        out.append(f"baseline mesh vs the 2x finer truth mesh (effect size of the null cases): median "
+                   f"{np.median(null_eff):.2f}, max {max(null_eff):.2f}")
+    secs = [r["seconds"] for r in rows if isinstance(r["seconds"], float)]
+    searched = [r["seconds"] for r in rows if isinstance(r["seconds"], float) and r["round1"]]
+    nan = float("nan")
+    out.append(f"total time {seconds:.0f} s; median {np.median(secs) if secs else nan:.2f} s per diagnose "
+               f"(max {max(secs) if secs else nan:.1f} s; median {np.median(searched) if searched else nan:.2f} s "
+               f"over the {len(searched)} diagnoses that refitted hypotheses)")
+    return "\n".join(out), ok
+
+
+def write_csv(rows: list[dict], path: Path) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(COLUMNS)
+        for r in sorted(rows, key=lambda r: r["case"]):
+            w.writerow([_fmt(r[c]) for c in COLUMNS])
+
+
+def _init_worker() -> None:
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[var] = "1"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--concealed", type=int, default=60, help="number of concealed-physics cases")
+    ap.add_argument("--null", type=int, default=30, help="number of null cases (nothing concealed)")
+    ap.add_argument("--seed", type=int, default=2024, help="master seed (everything else is drawn from it)")
+    ap.add_argument("--workers", type=int, default=2, help="worker processes")
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="CSV, one row per case")
+    ap.add_argument("--mesh-cache", type=Path, default=None,
+                    help="mesh cache folder (default: a temporary one, removed at the end)")
+    ap.add_argument("--show", type=int, default=None, metavar="INDEX",
+                    help="run only case INDEX (as numbered in the case names) here and print its diagnosis")
+    args = ap.parse_args(argv)
+
+    rng = np.random.default_rng(args.seed)
+    kinds = [KINDS[i % len(KINDS)] for i in range(args.concealed)]  # balanced, then shuffled
+    kinds = [kinds[i] for i in rng.permutation(len(kinds))] + ["null"] * args.null
+    specs = [random_case(i, k, args.seed) for i, k in enumerate(kinds)]
+
+    work = Path(tempfile.mkdtemp(prefix="geoback-diagacc-"))
+    cache = args.mesh_cache or (work / "cache")  # a temporary cache goes with `work`
+    os.environ["GEOBACK_CACHE"] = str(cache)  # inherited by the workers
+    if args.show is not None:
+        try:
+            r = run_one(specs[args.show], str(work), show=True)
+        finally:
+            shutil.rmtree(work, ignore_errors=True)
+        print({k: v for k, v in r.items() if v != ""})
+        return 0
+    t0 = time.perf_counter()
+    rows = []
+    try:
+        with ProcessPoolExecutor(args.workers, initializer=_init_worker) as pool:
+            futures = {pool.submit(run_one, s, str(work)): s for s in specs}
+            for fut in as_completed(futures):
+                r = fut.result()
+                rows.append(r)
+                eff = r["effect_size"] if isinstance(r["effect_size"], float) else float("nan")
+                raw = r["raw_movement"] if isinstance(r["raw_movement"], float) else float("nan")
+                mark = "ok " if r["correct"] else "WRONG"
+                secs = r["seconds"] if isinstance(r["seconds"], float) else float("nan")
+                print(f"[{len(rows):3d}/{len(specs)}] {r['case']:<34} {r['parameter']:<20} {_fmt(r['magnitude']):>9}  "
+                      f"effect {eff:7.2f}  raw {raw:7.2f}  -> {r['named']:<20} {mark} {secs:5.1f} s"
+                      + (f"  {r['error']}" if r["error"] else ""), flush=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    seconds = time.perf_counter() - t0
+    write_csv(rows, args.out)
+    text, ok = summary(rows, seconds)
+    print()
+    print(f"seed {args.seed}, {args.concealed} concealed + {args.null} null cases, {args.workers} workers; "
+          f"rows in {args.out}")
+    print(text)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
