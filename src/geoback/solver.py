@@ -13,6 +13,21 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 
+def _point_pypardiso_at_mkl() -> None:
+    """pypardiso looks for libmkl_rt by a recursive glob over the environment on every new
+    solver (about 0.3 s); tell it once where the pip-installed library is."""
+    if os.environ.get("PYPARDISO_MKL_RT"):
+        return
+    import glob
+    import sys
+
+    for root in (sys.prefix, sys.base_prefix):
+        found = sorted(glob.glob(os.path.join(root, "lib", "libmkl_rt.so*")), key=len)
+        if found:
+            os.environ["PYPARDISO_MKL_RT"] = found[0]
+            return
+
+
 def available_backends() -> list[str]:
     names = []
     try:
@@ -61,6 +76,7 @@ class Factorisation:
         if self.backend == "pardiso":
             import pypardiso
 
+            _point_pypardiso_at_mkl()
             self._solver = pypardiso.PyPardisoSolver(mtype=2)
             self._solver.set_statistical_info_off()
             self._matrix = upper
