@@ -255,14 +255,6 @@ class Case(Strict):
     fit: FitSettings = FitSettings()
     output: Output = Output()
 
-    def layer_of_depth(self, depth: float) -> int:
-        tops = [layer.top for layer in self.ground.layers]
-        return max(i for i, t in enumerate(tops) if t <= depth + 1e-12)
-
-    def k0(self, layer: int) -> float:
-        value = self.ground.layers[layer].K0
-        return value if value is not None else self.ground.K0  # type: ignore[return-value]
-
 
 def _g(x: float) -> str:
     return f"{x:g}"

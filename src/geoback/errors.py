@@ -25,7 +25,3 @@ class CaseError(GeobackError):
             where += ": "
         what = f"{field}: " if field else ""
         super().__init__(f"{where}{what}{message}")
-
-
-class IllPosed(GeobackError):
-    """The readings cannot determine what was asked of them."""

@@ -15,8 +15,6 @@ Shape functions and quadrature rules come from scikit-fem.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
@@ -25,8 +23,6 @@ from skfem.quadrature import get_quadrature
 from skfem.refdom import RefLine, RefTri
 
 from .mesh import Mesh
-
-COMPONENTS = ("D11", "D22", "D12", "D33")
 
 
 def _ref_basis(element, X: np.ndarray):
@@ -51,12 +47,6 @@ def _geometry(coords: np.ndarray, dN: np.ndarray):
     return inv, det  # inv[e,q,r,x] = d xi_r / d x_x
 
 
-@dataclass
-class Constraints:
-    fixed: np.ndarray  # boolean over all dofs
-    free_index: np.ndarray  # dof -> reduced index (or -1)
-
-
 class FEModel:
     """Assembled operators of one mesh. Dofs are (ux, uy) per node: dof = 2*node + component."""
 
@@ -73,7 +63,7 @@ class FEModel:
         self.element = _tri_element(self.order)
         nb = self.tri.shape[1]
         self._X, self._W = get_quadrature(RefTri, 2 * self.order)
-        self._N, self._dN = _ref_basis(self.element, self._X)
+        _, self._dN = _ref_basis(self.element, self._X)
 
         # boundary conditions: symmetry axis and far side ux = 0, bottom fixed
         x, y = self.nodes[:, 0], self.nodes[:, 1]
@@ -102,7 +92,6 @@ class FEModel:
         ra, rb = redofs[:, a.ravel()], redofs[:, b.ravel()]
         keep = (ra >= 0) & (rb >= 0) & (ra <= rb)
         self._entry_elem = np.repeat(np.arange(self.ne, dtype=np.int32), keep.sum(axis=1))
-        self._entry_local = np.nonzero(keep)[1].astype(np.int16)  # which of the (2nb)^2 pairs
         keys = ra[keep] * self.nfree + rb[keep]
         uniq, slots = np.unique(keys, return_inverse=True)
         self._slots = slots.astype(np.int64)

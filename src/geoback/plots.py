@@ -106,43 +106,11 @@ def _J(res, p: np.ndarray) -> float:
     return float(r @ r + rp @ rp)
 
 
-class _NotBatchable(Exception):
-    pass
-
-
 def _J_many(res, P: np.ndarray) -> np.ndarray:
-    """J at every row of P. When the stiffness of every point is a multiple of one factorised
-    matrix (only moduli scale, eqn 41), all the excavation loads are back-substituted together
-    in blocks; otherwise each point is a forward run of its own."""
-    pr, obj = res.problem, res.objective
+    """J at every row of P. Cheap when only moduli and K0 vary: the factorisation is reused
+    (eqn 41) and every load lies in the span of earlier ones (solver.Factorisation)."""
     P = np.atleast_2d(P)
     out = np.full(len(P), np.nan)
-    block = max(1, min(len(P), int(2e7 // max(pr.fe.nfree, 1))))  # ~160 MB of right-hand sides at most
-    try:
-        for c0 in range(0, len(P), block):
-            chunk = P[c0:c0 + block]
-            ref, rhs = None, []
-            for p in chunk:
-                st = pr.ground.state(pr.values_for(p))
-                fact, s = pr._factorised(st.coeffs)
-                if ref is None:
-                    ref = fact
-                elif fact is not ref:
-                    raise _NotBatchable
-                rhs.append(pr.fe.load(st.sigma_v, st.sigma_h) / s)
-            if getattr(ref, "backend", None) == "pardiso":  # blocked solves pay off
-                U = pr._solve(ref, 1.0, np.column_stack(rhs))
-            else:  # SuperLU: one right-hand side at a time is far faster than a block
-                U = np.column_stack([pr._solve(ref, 1.0, r) for r in rhs])
-            pr.counters.forward_runs += len(chunk)
-            X = np.column_stack([pr._readings(U[:, k], p) for k, p in enumerate(chunk)])
-            R = obj.whiten(obj.measured[:, None] - X)
-            for k, p in enumerate(chunk):
-                rp, _ = obj.prior_rows(p)
-                out[c0 + k] = float(R[:, k] @ R[:, k] + rp @ rp)
-        return out
-    except (_NotBatchable, AttributeError, TypeError):
-        pass
     for k, p in enumerate(P):  # one forward run per point
         try:
             out[k] = _J(res, p)

@@ -214,12 +214,6 @@ class Problem:
                 A[:, j] = -self.obs.G[:, k]
         return x, A
 
-    def full_displacement(self, p: np.ndarray | None = None, values: dict | None = None) -> np.ndarray:
-        """(N, 2) nodal displacements for parameters p (or named values)."""
-        values = values if values is not None else self.values_for(p if p is not None else self.params.initial)
-        u = self.fe.expand(self.displacement(values))
-        return u.reshape(-1, 2)
-
 
 def _proportion(a: np.ndarray, b: np.ndarray) -> float | None:
     """alpha with a = alpha b (to rounding), or None."""
