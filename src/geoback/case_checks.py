@@ -1,0 +1,278 @@
+"""Physical checks of a case that pydantic cannot express field by field: the tunnel below the
+surface and inside the model, layers in order, instruments in the ground and outside the
+tunnel, parameters within their bounds, a mesh of sensible size. Each problem is (path, message)."""
+from __future__ import annotations
+
+import math
+
+from .case import Case, Geometry
+
+
+def _g(x: float) -> str:
+    return f"{x:g}"
+
+
+def _inside_ground(g: Geometry, x: float, y: float) -> bool:
+    tol = 1e-9 * max(g.width, g.depth)
+    return -tol <= x <= g.width + tol and -g.depth - tol <= y <= tol
+
+
+def _inside_tunnel(g: Geometry, x: float, y: float) -> bool:
+    return math.hypot(x, y + g.axis_depth) < g.radius * (1 - 1e-6)
+
+
+def _segment_enters_tunnel(g: Geometry, a: tuple, b: tuple) -> bool:
+    """Does the straight segment a-b pass through the excavated tunnel's interior?"""
+    cx, cy = 0.0, -g.axis_depth
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    n2 = dx * dx + dy * dy
+    t = 0.0 if n2 == 0 else min(1.0, max(0.0, ((cx - a[0]) * dx + (cy - a[1]) * dy) / n2))
+    return math.hypot(a[0] + t * dx - cx, a[1] + t * dy - cy) < g.radius * (1 - 1e-6)
+
+
+def _ground_span(g: Geometry) -> str:
+    return f"x between 0 and {_g(g.width)}, y between {_g(-g.depth)} and 0"
+
+
+def _tunnel_text(g: Geometry) -> str:
+    return f"radius {_g(g.radius)} around (0, {_g(-g.axis_depth)})"
+
+
+def _point_problem(g: Geometry, p: tuple, what: str) -> str | None:
+    x, y = p
+    if not _inside_ground(g, x, y):
+        return f"expected {what} inside the ground ({_ground_span(g)}), found ({_g(x)}, {_g(y)})"
+    if _inside_tunnel(g, x, y):
+        return (f"expected {what} outside the excavated tunnel ({_tunnel_text(g)}), found ({_g(x)}, {_g(y)}), "
+                f"{_g(math.hypot(x, y + g.axis_depth))} from the tunnel axis")
+    return None
+
+
+def _instrument_problems(g: Geometry, i: int, ins) -> list[tuple[tuple, str]]:
+    at, out = ("instruments", i), []
+    if ins.kind == "points":
+        for j, p in enumerate(ins.points):
+            why = _point_problem(g, p, "a point")
+            if why:
+                out.append((at + ("points", j), why))
+    elif ins.kind == "convergence":
+        for j, p in enumerate(ins.points):
+            why = _point_problem(g, p, "a chord end")
+            if why:
+                out.append((at + ("points", j), why))
+    elif ins.kind == "inclinometer":
+        if not -1e-9 * g.width <= ins.x <= g.width * (1 + 1e-9):
+            out.append((at + ("x",), f"expected the borehole inside the ground (x between 0 and {_g(g.width)}), "
+                                     f"found x {_g(ins.x)}"))
+        elif ins.toe_depth <= ins.head_depth:
+            out.append((at + ("toe_depth",), f"expected the toe deeper than the head (head_depth "
+                                             f"{_g(ins.head_depth)}), found toe_depth {_g(ins.toe_depth)}"))
+        elif ins.toe_depth > g.depth * (1 + 1e-9):
+            out.append((at + ("toe_depth",), f"expected the toe inside the ground (depth at most the model's "
+                                             f"depth {_g(g.depth)}), found toe_depth {_g(ins.toe_depth)}"))
+        elif _segment_enters_tunnel(g, (ins.x, -ins.head_depth), (ins.x, -ins.toe_depth)):
+            out.append((at + ("x",), f"expected the borehole to miss the excavated tunnel ({_tunnel_text(g)}), "
+                                     f"found it passing through the tunnel at x {_g(ins.x)} between depths "
+                                     f"{_g(ins.head_depth)} and {_g(ins.toe_depth)}"))
+    else:  # sliding micrometer, extensometer, deflectometer
+        for end in ("start", "end"):
+            why = _point_problem(g, getattr(ins, end), f"the line's {end}")
+            if why:
+                out.append((at + (end,), why))
+                return out
+        if tuple(ins.start) == tuple(ins.end):
+            out.append((at + ("end",), f"expected an end different from the start, found the same point "
+                                       f"({_g(ins.end[0])}, {_g(ins.end[1])})"))
+        elif _segment_enters_tunnel(g, ins.start, ins.end):
+            out.append((at + ("end",), f"expected the measuring line to miss the excavated tunnel "
+                                       f"({_tunnel_text(g)}), found the line from ({_g(ins.start[0])}, "
+                                       f"{_g(ins.start[1])}) to ({_g(ins.end[0])}, {_g(ins.end[1])}) "
+                                       f"passing through it"))
+    return out
+
+
+MAX_RADIUS = 1e3  # m: gmsh's geometry kernel fails on larger tunnels (and none is that large)
+MAX_SIZE = 1e5  # m: width and depth of the model
+MAX_STATIONS = 2_000  # stations per instrument: its covariance matrix is dense
+MAX_ELEMENTS = 1_000_000  # estimated triangles of the mesh: beyond this gmsh and the solver take far too long
+
+
+def _line_length(ins) -> float:
+    if ins.kind == "inclinometer":
+        return ins.toe_depth - ins.head_depth
+    return math.hypot(ins.end[0] - ins.start[0], ins.end[1] - ins.start[1])
+
+
+def _station_count(ins) -> tuple[int, str]:
+    """Number of stations of a linewise instrument and the field that sets it."""
+    if ins.lengths is not None:
+        return len(ins.lengths), "lengths"
+    if ins.stations is not None:
+        return ins.stations, "stations"
+    return max(int(math.floor(_line_length(ins) / ins.spacing + 1e-9)), 1), "spacing"
+
+
+def _covariance_problem(ins) -> tuple[str, str] | None:
+    """A reading covariance that cannot be factorised (sigma's square underflows, or the
+    integration constants' variances swamp it): (field, message)."""
+    s2 = ins.sigma * ins.sigma  # (** would raise OverflowError)
+    if not (s2 > 0 and math.isfinite(s2) and math.isfinite(1.0 / s2)):
+        return "sigma", (f"expected a standard deviation whose square is a usable number (between about "
+                         f"1e-150 and 1e150), found {_g(ins.sigma)}")
+    if ins.kind not in ("inclinometer", "sliding_micrometer", "extensometer", "deflectometer"):
+        return None
+    from . import covariance as cov  # numpy only; no geoback imports
+
+    kind = cov.normalise_kind(ins.kind)
+    variances = {n: getattr(ins, f"var_{n.lower()}") for n in cov.constant_names(kind)}
+    try:
+        n, _ = _station_count(ins)
+        lengths = cov.station_lengths(lengths=ins.lengths) if ins.lengths is not None else \
+            cov.station_lengths(stations=n, spacing=ins.spacing)
+        C = cov.instrument_covariance(kind, lengths, ins.sigma, variances)
+        cov.cholesky_factor(C, ins.name)
+    except cov.NotPositiveDefinite as exc:
+        big = ", ".join(f"var_{k.lower()} {_g(v)}" for k, v in variances.items() if v)
+        return "sigma", (f"expected sigma {_g(ins.sigma)}" + (f" and {big}" if big else "")
+                         + f" to give a positive-definite reading covariance, found it singular ({exc})")
+    except ValueError:
+        return None  # reported with its context when the instrument is built
+    return None
+
+
+def _mesh_estimate(case: Case) -> dict[str, float]:
+    """Rough number of triangles gmsh will make, split by the mesh size responsible."""
+    try:
+        return _mesh_estimate_(case)
+    except (ZeroDivisionError, OverflowError, ValueError):
+        return {"size_far": math.inf}
+
+
+def _mesh_estimate_(case: Case) -> dict[str, float]:
+    g, m = case.geometry, case.mesh
+    t = m.size_tunnel or g.radius / 8
+    far = m.size_far or max(g.width, g.depth) / 12
+    k = 2.31  # triangles per h^2 of area (equilateral)
+    growth = m.growth
+    out = {"size_far": k * g.width * g.depth / (far * far), "size_tunnel": 0.0, "size_instruments": 0.0}
+    if far > t:  # graded ring around the wall: integral of 1/h^2 over the half annulus
+        out["size_tunnel"] = k * math.pi / growth * ((g.radius - t / growth) * (1 / t - 1 / far)
+                                                      + math.log(far / t) / growth)
+    si = m.size_instruments
+    if si and far > si:
+        points = sum(len(ins.points) if ins.kind in ("points", "convergence") else 25 for ins in case.instruments)
+        out["size_instruments"] = points * k * 2 * math.pi * (0.5 + math.log(far / si) / growth ** 2)
+    return out
+
+
+def physical_problems(case: Case) -> list[tuple[tuple, str]]:
+    """Checks pydantic cannot express field by field: (path, message) for each problem."""
+    g, problems = case.geometry, []
+    if g.axis_depth - g.radius <= 0:
+        problems.append((("geometry", "axis_depth"),
+                         f"expected the tunnel below the surface (axis_depth greater than the radius "
+                         f"{_g(g.radius)}), found axis_depth {_g(g.axis_depth)}: the tunnel reaches above the surface"))
+    if g.radius >= g.width:
+        problems.append((("geometry", "width"),
+                         f"expected the half-model wider than the tunnel (width greater than the radius "
+                         f"{_g(g.radius)}), found width {_g(g.width)}: the tunnel is wider than the domain"))
+    if g.axis_depth + g.radius >= g.depth:
+        problems.append((("geometry", "depth"),
+                         f"expected the model's bottom below the tunnel's invert (depth greater than "
+                         f"axis_depth + radius = {_g(g.axis_depth + g.radius)}), found depth {_g(g.depth)}"))
+    for field, value, cap in (("radius", g.radius, MAX_RADIUS), ("width", g.width, MAX_SIZE),
+                              ("depth", g.depth, MAX_SIZE)):
+        if value > cap:
+            problems.append((("geometry", field), f"expected at most {cap:g} m (lengths are in metres), "
+                                                  f"found {field} {_g(value)}"))
+    if g.radius < 1e-5 * max(g.width, g.depth) * (1 - 1e-9):
+        problems.append((("geometry", "radius"),
+                         f"expected a radius of at least 1e-5 times the model's size ({_g(1e-5 * max(g.width, g.depth))}), "
+                         f"found {_g(g.radius)}: the mesher cannot resolve a tunnel that small"))
+    layers = case.ground.layers
+    if layers[0].top != 0:
+        problems.append((("ground", "layers", 0, "top"),
+                         f"expected the first layer to start at the surface (top: 0), found top {_g(layers[0].top)}"))
+    for i in range(1, len(layers)):
+        if layers[i].top <= layers[i - 1].top:
+            problems.append((("ground", "layers", i, "top"),
+                             f"expected layer tops increasing downwards (greater than the previous top "
+                             f"{_g(layers[i - 1].top)}), found top {_g(layers[i].top)}"))
+        elif layers[i].top >= g.depth:
+            problems.append((("ground", "layers", i, "top"),
+                             f"expected the layer's top above the model's bottom (less than depth {_g(g.depth)}), "
+                             f"found top {_g(layers[i].top)}"))
+        elif min(layers[i].top - layers[i - 1].top, g.depth - layers[i].top) < 1e-6 * g.depth:
+            problems.append((("ground", "layers", i, "top"),
+                             f"expected layers at least {_g(1e-6 * g.depth)} thick (1e-6 of the model's depth), "
+                             f"found top {_g(layers[i].top)} within that of the next boundary"))
+    names = [layer.name for layer in layers]
+    for i, n in enumerate(names):
+        if names.index(n) != i:
+            problems.append((("ground", "layers", i, "name"),
+                             f"expected unique layer names, found '{n}' again (as in ground.layers[{names.index(n)}])"))
+    for i, layer in enumerate(layers):
+        if layer.K0 is None and case.ground.K0 is None:
+            problems.append((("ground", "layers", i, "K0"),
+                             "expected a K0 for this layer (or ground.K0 for all layers), found none"))
+    inames = [ins.name for ins in case.instruments]
+    for i, n in enumerate(inames):
+        if inames.index(n) != i:
+            problems.append((("instruments", i, "name"),
+                             f"expected unique instrument names, found '{n}' again (as in instruments[{inames.index(n)}])"))
+    for i, ins in enumerate(case.instruments):
+        problems.extend(_instrument_problems(g, i, ins))
+        if ins.kind in ("inclinometer", "sliding_micrometer", "extensometer", "deflectometer"):
+            n, field = _station_count(ins)
+            if n > MAX_STATIONS:
+                problems.append((("instruments", i, field),
+                                 f"expected at most {MAX_STATIONS} stations, found {n}"))
+                continue
+            length = _line_length(ins)
+            reach = sum(ins.lengths) if ins.lengths is not None else n * ins.spacing
+            if reach > length * (1 + 1e-9):
+                problems.append((("instruments", i, field),
+                                 f"expected the stations within the instrument's length {_g(length)} m, found "
+                                 f"them reaching {_g(reach)} m from the reference end"))
+                continue
+        bad = _covariance_problem(ins)
+        if bad:
+            problems.append((("instruments", i, bad[0]), bad[1]))
+    for field in ("size_tunnel", "size_far", "size_instruments"):
+        size = getattr(case.mesh, field)
+        if size is not None and size < 1e-4 * g.radius:
+            problems.append((("mesh", field), f"expected an element size of at least 1e-4 times the radius "
+                                              f"({_g(1e-4 * g.radius)}), found {_g(size)}"))
+    if case.mesh.size_tunnel is not None and case.mesh.size_tunnel > g.radius:
+        problems.append((("mesh", "size_tunnel"),
+                         f"expected an element size at the wall of at most the radius {_g(g.radius)} "
+                         f"(else the tunnel is not round), found {_g(case.mesh.size_tunnel)}"))
+    estimate = _mesh_estimate(case)
+    if sum(estimate.values()) > MAX_ELEMENTS:
+        worst = max(estimate, key=estimate.get)
+        problems.append((("mesh", worst),
+                         f"expected mesh sizes giving at most about {MAX_ELEMENTS:,} elements, found sizes "
+                         f"giving about {sum(estimate.values()):,.0f} (mostly from {worst} "
+                         f"{_g(getattr(case.mesh, worst) or 0) if getattr(case.mesh, worst) else '(default)'})"))
+    for i, p in enumerate(case.parameters):
+        if p.bounds is not None:
+            lo, hi = p.bounds
+            if not lo < hi:
+                problems.append((("parameters", i, "bounds"),
+                                 f"expected a lower bound below the upper bound, found [{_g(lo)}, {_g(hi)}]"))
+            elif not lo <= p.initial <= hi:
+                problems.append((("parameters", i, "initial"),
+                                 f"expected an initial value within the bounds [{_g(lo)}, {_g(hi)}], "
+                                 f"found {_g(p.initial)} (outside the bounds)"))
+            if p.log and lo <= 0:
+                problems.append((("parameters", i, "bounds"),
+                                 f"expected positive bounds for a log-transformed parameter, found lower bound {_g(lo)}"))
+        if p.log and p.initial <= 0:
+            problems.append((("parameters", i, "initial"),
+                             f"expected a positive initial value for a log-transformed parameter, found {_g(p.initial)}"))
+    pnames = [p.name for p in case.parameters]
+    for i, n in enumerate(pnames):
+        if pnames.index(n) != i:
+            problems.append((("parameters", i, "name"),
+                             f"expected each parameter once, found '{n}' again (as in parameters[{pnames.index(n)}])"))
+    return problems
