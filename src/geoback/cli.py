@@ -130,7 +130,7 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
         typer.echo(f"{sum(len(v) for v in readings.values())} readings (mesh x{refine:g} finer"
                    f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
         return
-    problem = Problem(loaded, parameters=[], extra_values=values, with_readings=False)
+    problem = Problem(loaded, parameters=[], extra_values=values)  # readings, if any, are listed too
     folder = _out_dir(loaded, out)
     res = run_simulation(problem, folder, vtu=vtu and loaded.case.output.vtu)
     typer.echo(f"{problem.obs.m} readings predicted on {res['dofs']} dofs -> {folder}/predicted.csv")

@@ -229,12 +229,19 @@ def write_mesh(mesh: Mesh, path: Path, point_data: dict | None = None, cell_data
     import meshio
 
     cell_type = "triangle6" if mesh.order == 2 else "triangle"
-    cells = [(cell_type, mesh.triangles)]
-    cdata = {"region": [mesh.region.astype(np.int32)]}
-    for k, v in (cell_data or {}).items():
-        cdata[k] = [v]
-    m = meshio.Mesh(np.column_stack([mesh.nodes, np.zeros(len(mesh.nodes))]), cells,
-                    point_data=point_data or {}, cell_data=cdata)
+    points = np.column_stack([mesh.nodes, np.zeros(len(mesh.nodes))])
+    if Path(path).suffix == ".msh":  # gmsh's own tags: one physical group per layer, 100 = tunnel wall
+        tags = [mesh.region.astype(np.int32) + 1, np.full(len(mesh.tunnel_edges), 100, np.int32)]
+        edge_type = "line3" if mesh.order == 2 else "line"
+        m = meshio.Mesh(points, [(cell_type, mesh.triangles), (edge_type, mesh.tunnel_edges)],
+                        cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags},
+                        field_data={**{name: np.array([i + 1, 2]) for i, name in enumerate(mesh.region_names)},
+                                    "tunnel": np.array([100, 1])})
+    else:
+        cdata = {"region": [mesh.region.astype(np.int32)]}
+        for k, v in (cell_data or {}).items():
+            cdata[k] = [v]
+        m = meshio.Mesh(points, [(cell_type, mesh.triangles)], point_data=point_data or {}, cell_data=cdata)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp" + path.suffix)
