@@ -93,7 +93,7 @@ def run(size_tunnel: float, growth) -> dict:
     ur_raw = np.einsum("nx,nx->n", u[wall], d) / r
     ur_t = ur_raw - shift * d[:, 1] / r
     return dict(
-        size_tunnel=size_tunnel, growth=growth if growth is not None else gmesh.GROWTH,
+        size_tunnel=size_tunnel, growth=case.mesh.growth,
         dofs=fe.nfree, elements=fe.ne,
         err_crown=abs(u[crown, 1] / exact_ur(np.pi / 2) - 1),
         err_crown_t=abs((u[crown, 1] - shift) / exact_ur(np.pi / 2) - 1),
