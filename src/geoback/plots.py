@@ -429,8 +429,10 @@ def _line_geometry(block):
     return start, d, s
 
 
-def instruments_figure(res) -> Figure:
-    """Measured and computed readings along every instrument, +-2 sigma from diag C_x."""
+def instruments_figure(res, before: np.ndarray | None = None, before_label: str = "before",
+                       title: str | None = None) -> Figure:
+    """Measured and computed readings along every instrument, +-2 sigma from diag C_x; `before`
+    adds another model's readings (e.g. the baseline of a diagnosis) as a dashed red line."""
     pr, f = res.problem, res.fit
     obs = pr.obs
     blocks = obs.blocks
@@ -450,6 +452,7 @@ def instruments_figure(res) -> Figure:
         rows = np.arange(row0, row0 + len(block.labels))
         row0 += len(block.labels)
         xm, xc, sg, r_ = measured[rows] * mm, computed[rows] * mm, sigma[rows] * mm, rw[rows]
+        xb = before[rows] * mm if before is not None else None
         chi2_block = float(r_ @ r_)
         linewise = block.integration is not None
         if linewise:
@@ -479,6 +482,8 @@ def instruments_figure(res) -> Figure:
                     ax.plot(dense[0], dense[1], color="#1f77b4", lw=1.2, alpha=0.7, label="model along the line")
                 ax.plot(xc, coord, ls="none", marker="o", ms=6, mfc="white", mec="#1f77b4", mew=1.6,
                         label="computed at stations")
+                if xb is not None:
+                    ax.plot(xb, coord, ls="--", marker="s", ms=3.5, lw=1.2, color=BEFORE, label=before_label)
                 ax.plot(xm, coord, ls="none", marker="x", ms=7, mew=1.8, color="k", label="measured")
                 ax.axvline(0, color="0.7", lw=0.7, zorder=0)
                 ax.invert_yaxis()
@@ -497,6 +502,8 @@ def instruments_figure(res) -> Figure:
                     ax.plot(dense[1], dense[0], color="#1f77b4", lw=1.2, alpha=0.7, label="model along the line")
                 ax.plot(coord, xc, ls="none", marker="o", ms=6, mfc="white", mec="#1f77b4", mew=1.6,
                         label="computed at stations")
+                if xb is not None:
+                    ax.plot(coord, xb, ls="--", marker="s", ms=3.5, lw=1.2, color=BEFORE, label=before_label)
                 ax.plot(coord, xm, ls="none", marker="x", ms=7, mew=1.8, color="k", label="measured")
                 ax.axhline(0, color="0.7", lw=0.7, zorder=0)
                 ax.set_xlabel("horizontal distance from the symmetry axis x [m]")
@@ -513,6 +520,8 @@ def instruments_figure(res) -> Figure:
             ax.errorbar(k, xm, yerr=2 * sg, ls="none", marker="x", ms=7, mew=1.8, color="k", capsize=4,
                         elinewidth=1.0, label="measured ± 2σ (case C_x)")
             ax.plot(k, xc, ls="none", marker="o", ms=6, mfc="white", mec="#1f77b4", mew=1.6, label="computed")
+            if xb is not None:
+                ax.plot(k, xb, ls="none", marker="s", ms=5, color=BEFORE, label=before_label)
             ax.set_xticks(k)
             if block.kind == "points":
                 ax.set_xticklabels([f"{lab.component} at ({lab.x:g}, {lab.y:g})" for lab in block.labels],
@@ -542,10 +551,15 @@ def instruments_figure(res) -> Figure:
                Line2D([], [], ls="none", marker="x", ms=7, mew=1.8, color="k", label="measured"),
                Line2D([], [], ls="none", marker="$r′$", ms=9, color="0.25",
                       label="whitened residual r′ = L⁻¹(x* − x(p̂)) (red if |r′| > 2)")]
+    if before is not None:
+        handles.append(Line2D([], [], ls="--", marker="s", ms=3.5, lw=1.2, color=BEFORE, label=before_label))
     fig.legend(handles=handles, loc="outside lower center", ncols=3, fontsize=8.5, frameon=False)
-    fig.suptitle(f"Measured and computed readings at the estimate (fit: {res.objective.weighting} weighting; "
-                 f"σ and whitened residuals r′ from the case's C_x)", fontsize=10.5)
+    fig.suptitle(title or f"Measured and computed readings at the estimate (fit: {res.objective.weighting} "
+                          f"weighting; σ and whitened residuals r′ from the case's C_x)", fontsize=10.5)
     return fig
+
+
+BEFORE = "#d62728"  # colour of a second model's readings (a diagnosis' baseline)
 
 
 def _direction_words(v: np.ndarray) -> str:
