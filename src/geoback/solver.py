@@ -55,7 +55,7 @@ def default_backend(n: int | None = None) -> str:
 
 
 SPAN_TOL = 1e-12  # a right-hand side this close to the span of earlier ones reuses their solutions
-MAX_BASIS = 16
+MAX_BASIS = 8  # n x 8 x 2 floats kept per factorisation (90 MB at 700 k DOFs)
 
 
 class Factorisation:
