@@ -178,7 +178,7 @@ def _stack(readings: dict, problem) -> np.ndarray:
 def run_one(spec: dict, folder: str, show: bool = False) -> dict:
     """Truth readings, effect size, raw movement, and the diagnosis of one case."""
     from geoback.case import LoadedCase, case_from_data
-    from geoback.diagnose import diagnose
+    from geoback.diagnosis import diagnose
     from geoback.estimate import fit
     from geoback.problem import Problem
     from geoback.simulate import synthetic_readings
@@ -211,7 +211,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         d = diagnose(loaded, problem=problem)
         row["seconds"] = time.perf_counter() - t0
         if show:
-            from geoback.diagnose import diagnosis_text
+            from geoback.diagnosis import diagnosis_text
 
             print(diagnosis_text(d))
 

@@ -4,7 +4,7 @@ The paper case (cases/tunnel-paper.yaml: E, K0 from inclinometer I1 and extensom
 readings and its weighting) with both element sizes divided by --scale (default 11.6: about
 100 k DOFs). Two ways to identify E and K0 from E = 5 MPa, K0 = 0.5:
 
-  geoback    the library path of `geoback run` (geoback.identify.run_case: mesh from the
+  geoback    the library path of `geoback run` (geoback.identification.run_case: mesh from the
              cache, assembly, LM fit with exact sensitivities, reliability, and every output file
              of `geoback run`, field.vtu included) into a temporary folder. No subprocess: the
              CLI adds only its start-up (imports) to this.
@@ -57,7 +57,7 @@ def drop_factorisation(problem) -> None:
 
 
 def run_geoback(loaded) -> dict:
-    from geoback.identify import run_case
+    from geoback.identification import run_case
 
     with tempfile.TemporaryDirectory() as out:
         c0, t0 = time.process_time(), time.perf_counter()

@@ -144,7 +144,7 @@ def noise_from_cx(problem, rng: np.random.Generator, scale: float = 1.0) -> np.n
 def identify_p(problem, weighting: str, p0=None):
     """Fit and assess on the problem's current readings; returns (Fit, Reliability)."""
     from geoback.estimate import Objective, fit
-    from geoback.identify import reliability_of
+    from geoback.identification import reliability_of
 
     result = fit(problem, weighting=weighting, p0=p0)
     rel = reliability_of(problem, result, Objective(problem, weighting))

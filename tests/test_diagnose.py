@@ -9,7 +9,7 @@ import pytest
 
 from conftest import CASES
 from geoback.case import load_case
-from geoback.diagnose import diagnose
+from geoback.diagnosis import diagnose
 
 CONCEALED = CASES / "concealed"
 

@@ -8,7 +8,7 @@ import pytest
 
 from geoback.case import LoadedCase, case_from_data, load_case
 from geoback.estimate import fit
-from geoback.identify import identify, run_case
+from geoback.identification import identify, run_case
 from geoback.problem import Problem
 
 
@@ -124,3 +124,14 @@ def test_cli_run_prints_report_and_exits_zero(paper_case_path, tmp_path):
     assert out.returncode == 0, out.stderr
     assert "E[clay]" in out.stdout and "converged" in out.stdout
     assert "Traceback" not in out.stderr
+
+
+def test_library_entry_points(paper_case_path):
+    """DESIGN.md: `from geoback import load_case, identify, diagnose` is the library's front door."""
+    import geoback.diagnosis  # noqa: F401 - importing the modules must not shadow the functions
+    import geoback.identification  # noqa: F401
+    from geoback import diagnose, identify
+
+    res = identify(load_case(paper_case_path))
+    assert abs(res.fit.p[0] / 10000 - 1) < 0.005
+    assert callable(diagnose)

@@ -16,7 +16,7 @@ import yaml
 
 import geoback.outputs
 from geoback.case import load_case
-from geoback.identify import identify, run_case
+from geoback.identification import identify, run_case
 from geoback.report import write_run
 
 ROOT = Path(__file__).resolve().parents[1]

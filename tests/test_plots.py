@@ -10,7 +10,7 @@ import pytest
 
 from geoback import plots
 from geoback.case import load_case
-from geoback.identify import identify
+from geoback.identification import identify
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_CASE = ROOT / "cases" / "tunnel-paper.yaml"

@@ -97,7 +97,7 @@ def test_cp_equals_scipy_least_squares_covariance():
     from scipy.optimize import least_squares
 
     import common as C
-    from geoback.identify import identify
+    from geoback.identification import identify
     from geoback.simulate import synthetic_readings
 
     data = C.case_dict(weighting="full")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from geoback import plots
 from geoback.case import load_case
-from geoback.identify import identify
+from geoback.identification import identify
 
 HERE = Path(__file__).resolve().parent
 CASE = HERE.parents[1] / "cases" / "tunnel-paper.yaml"

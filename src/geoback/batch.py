@@ -144,7 +144,7 @@ def run_one(path: str, out_dir: str, name: str | None = None, in_worker: bool = 
         except ImportError:
             threadpool_limits = None
         from .case import load_case
-        from .identify import run_case
+        from .identification import run_case
 
         loaded = load_case(path)
         row["case"] = loaded.case.name

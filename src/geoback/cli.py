@@ -144,8 +144,8 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
              plots: bool = typer.Option(True, help="write the before/after figure"),
              quiet: bool = typer.Option(False, "--quiet", "-q")):
     """Is the model adequate? If not: where is the mismatch, what physics is missing, how much better it fits."""
-    from .diagnose import diagnose as run_diagnosis, diagnosis_text, write_diagnosis
-    from .diagnose.report import verdict
+    from .diagnosis import diagnose as run_diagnosis, diagnosis_text, write_diagnosis
+    from .diagnosis.report import verdict
 
     loaded = _load(case)
     console = _console()
@@ -172,7 +172,7 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
     if method is not None and method not in ("lm", "lm-scaled", "gn"):
         raise GeobackError(f"--method must be lm, lm-scaled or gn, not '{method}'")
     loaded = _load(case)  # schema errors first: no heavy imports before them
-    from .identify import run_case
+    from .identification import run_case
     from .report import report_text, summary
 
     folder = _out_dir(loaded, out)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 def before_after_figure(d):
     from ..estimate import Objective
-    from ..identify import RunResult
+    from ..identification import RunResult
     from ..plots import instruments_figure
 
     final = d.final_problem

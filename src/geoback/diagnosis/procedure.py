@@ -21,7 +21,7 @@ import numpy as np
 from ..case import Parameter
 from ..estimate import Fit, Objective, fit
 from ..reliability import Reliability, chi2_sf
-from ..identify import reliability_of
+from ..identification import reliability_of
 from .hypotheses import Hypothesis, candidate_hypotheses
 
 COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mimic
