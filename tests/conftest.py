@@ -15,3 +15,15 @@ if not os.environ.get("GEOBACK_CACHE"):
 @pytest.fixture
 def paper_case_path() -> Path:
     return CASES / "tunnel-paper.yaml"
+
+
+def central_difference_error(problem, p, A, j: int, h: float) -> float:
+    """Relative difference between column j of the exact sensitivity A = dx/dp at p and the
+    central finite difference with step h."""
+    import numpy as np
+
+    up, down = p.copy(), p.copy()
+    up[j] += h
+    down[j] -= h
+    fd = (problem.predict(up) - problem.predict(down)) / (2 * h)
+    return float(np.linalg.norm(fd - A[:, j]) / np.linalg.norm(A[:, j]))

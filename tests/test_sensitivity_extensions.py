@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import yaml
 
-from conftest import CASES
+from conftest import CASES, central_difference_error
 from geoback.case import LoadedCase, case_from_data
 from geoback.ground import plane_strain_cross_anisotropic, plane_strain_isotropic
 from geoback.problem import Problem
@@ -28,12 +28,7 @@ def test_extension_sensitivities_match_central_differences(problem):
     p = problem.params.initial.copy()
     _, A = problem.predict_with_sensitivity(p)
     for j, name in enumerate(problem.params.names):
-        h = 1e-5 * max(abs(p[j]), 1e-2)
-        up, down = p.copy(), p.copy()
-        up[j] += h
-        down[j] -= h
-        fd = (problem.predict(up) - problem.predict(down)) / (2 * h)
-        err = np.linalg.norm(fd - A[:, j]) / np.linalg.norm(A[:, j])
+        err = central_difference_error(problem, p, A, j, 1e-5 * max(abs(p[j]), 1e-2))
         assert err < 1e-6, (name, err)
 
 

@@ -475,17 +475,19 @@ def instruments_figure(res, before: np.ndarray | None = None, before_label: str 
                              -P[:, 1] if vertical else P[:, 0])
                 except ValueError:
                     dense = None
+            # draw (value, coordinate) pairs: depth downwards for vertical lines, x across otherwise
+            pair = (lambda v, c: (v, c)) if vertical else (lambda v, c: (c, v))
+            (ax.fill_betweenx if vertical else ax.fill_between)(coord, xm - 2 * sg, xm + 2 * sg, color="0.55",
+                                                                alpha=0.25, lw=0, label="measured ± 2σ (case C_x)")
+            if dense is not None:
+                ax.plot(*pair(dense[0], dense[1]), color="#1f77b4", lw=1.2, alpha=0.7, label="model along the line")
+            ax.plot(*pair(xc, coord), ls="none", marker="o", ms=6, mfc="white", mec="#1f77b4", mew=1.6,
+                    label="computed at stations")
+            if xb is not None:
+                ax.plot(*pair(xb, coord), ls="--", marker="s", ms=3.5, lw=1.2, color=BEFORE, label=before_label)
+            ax.plot(*pair(xm, coord), ls="none", marker="x", ms=7, mew=1.8, color="k", label="measured")
+            (ax.axvline if vertical else ax.axhline)(0, color="0.7", lw=0.7, zorder=0)
             if vertical:
-                ax.fill_betweenx(coord, xm - 2 * sg, xm + 2 * sg, color="0.55", alpha=0.25, lw=0,
-                                 label="measured ± 2σ (case C_x)")
-                if dense is not None:
-                    ax.plot(dense[0], dense[1], color="#1f77b4", lw=1.2, alpha=0.7, label="model along the line")
-                ax.plot(xc, coord, ls="none", marker="o", ms=6, mfc="white", mec="#1f77b4", mew=1.6,
-                        label="computed at stations")
-                if xb is not None:
-                    ax.plot(xb, coord, ls="--", marker="s", ms=3.5, lw=1.2, color=BEFORE, label=before_label)
-                ax.plot(xm, coord, ls="none", marker="x", ms=7, mew=1.8, color="k", label="measured")
-                ax.axvline(0, color="0.7", lw=0.7, zorder=0)
                 ax.invert_yaxis()
                 ax.set_ylabel("depth below the surface [m]")
                 ax.set_xlabel(f"{what} [mm]")
@@ -496,16 +498,6 @@ def instruments_figure(res, before: np.ndarray | None = None, before_label: str 
                 ax.text(1.01, 1.0, "r′", transform=ax.transAxes, fontsize=8, va="bottom", ha="left",
                         fontweight="bold")
             else:
-                ax.fill_between(coord, xm - 2 * sg, xm + 2 * sg, color="0.55", alpha=0.25, lw=0,
-                                label="measured ± 2σ (case C_x)")
-                if dense is not None:
-                    ax.plot(dense[1], dense[0], color="#1f77b4", lw=1.2, alpha=0.7, label="model along the line")
-                ax.plot(coord, xc, ls="none", marker="o", ms=6, mfc="white", mec="#1f77b4", mew=1.6,
-                        label="computed at stations")
-                if xb is not None:
-                    ax.plot(coord, xb, ls="--", marker="s", ms=3.5, lw=1.2, color=BEFORE, label=before_label)
-                ax.plot(coord, xm, ls="none", marker="x", ms=7, mew=1.8, color="k", label="measured")
-                ax.axhline(0, color="0.7", lw=0.7, zorder=0)
                 ax.set_xlabel("horizontal distance from the symmetry axis x [m]")
                 ax.set_ylabel(f"{what} [mm]")
                 tr = blended_transform_factory(ax.transData, ax.transAxes)
