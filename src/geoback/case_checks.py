@@ -5,11 +5,7 @@ from __future__ import annotations
 
 import math
 
-from .case import Case, Geometry
-
-
-def _g(x: float) -> str:
-    return f"{x:g}"
+from .case_schema import Case, Geometry, _g
 
 
 def _inside_ground(g: Geometry, x: float, y: float) -> bool:

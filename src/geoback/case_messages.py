@@ -5,9 +5,8 @@ from __future__ import annotations
 import difflib
 from typing import Any
 
-from .case import (Case, Convergence, Deflectometer, FitSettings, Geometry, Ground, Inclinometer, Layer,
-                   MeshSettings, Output, Parameter, PointsInstrument, Prior, SlidingMicrometer, _show)
-from .case_checks import _g
+from .case_schema import (Case, Convergence, Deflectometer, FitSettings, Geometry, Ground, Inclinometer, Layer,
+                          MeshSettings, Output, Parameter, PointsInstrument, Prior, SlidingMicrometer, _g, _show)
 from .yamlmarks import locate, printable
 
 
