@@ -171,8 +171,8 @@ def random_case(index: int, kind: str, master_seed: int) -> dict:
             "R": R, "zc": zc, "E": E, "nu": nu, "K0": K0, "layout": " ".join(layout)}
 
 
-def _stack(readings: dict, problem) -> np.ndarray:
-    return np.concatenate([readings[b.name] for b in problem.obs.blocks])
+def _stack(readings: dict, analysis) -> np.ndarray:
+    return np.concatenate([readings[b.name] for b in analysis.simulation.survey.blocks])
 
 
 def run_one(spec: dict, folder: str, show: bool = False) -> dict:
@@ -180,7 +180,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
     from geoback.case import LoadedCase, case_from_data
     from geoback.diagnosis import diagnose
     from geoback.estimate import fit
-    from geoback.problem import Problem
+    from geoback.identification import prepare
     from geoback.simulate import synthetic_readings
 
     row = {k: "" for k in COLUMNS}
@@ -200,23 +200,23 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         clean = synthetic_readings(truth, refine=2.0, values=spec["values"], noise_seed=None)
         base_clean = synthetic_readings(loaded, refine=2.0, values=None, noise_seed=None)
 
-        problem = Problem(loaded, with_readings=False)
-        sigma = np.sqrt(np.diag(problem.obs.covariance))
+        problem = prepare(loaded, with_readings=False)
         x_truth, x_base = _stack(clean, problem), _stack(base_clean, problem)
+        problem = problem.with_readings(_stack(noisy, problem))
+        sigma = np.sqrt(np.diag(problem.misfit.data.covariance))
         row["raw_movement"] = float(np.max(np.abs(x_truth - x_base) / sigma))
         row["readings"] = len(x_truth)
 
-        problem.obs.measured = _stack(noisy, problem)
         t0 = time.perf_counter()
-        d = diagnose(loaded, problem=problem)
+        d = diagnose(problem)
         row["seconds"] = time.perf_counter() - t0
         if show:
             from geoback.diagnosis import diagnosis_text
 
             print(diagnosis_text(d))
 
-        problem.obs.measured = x_truth  # noise-free truth: what the baseline cannot absorb
-        row["effect_size"] = float(math.sqrt(max(fit(problem).J, 0.0)))
+        truth_fit = fit(problem.misfit.with_measured(x_truth), problem.settings)  # what the baseline cannot absorb
+        row["effect_size"] = float(math.sqrt(max(truth_fit.J, 0.0)))
 
         kinds = [s.hypothesis.kind for s in d.accepted]
         named = kinds[0] if kinds else "nothing"

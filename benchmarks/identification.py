@@ -15,7 +15,7 @@ readings and its weighting) with both element sizes divided by --scale (default 
              finite-difference loop around a forward code does. Factorisations = fun calls.
 
 Both start from a warm mesh cache (meshing is reported separately and counted for neither);
-both times include building the Problem (FE model, instruments). The covariance of the
+both times include preparing the case (FE model, instruments). The covariance of the
 estimate from least_squares (inv(J^t J) with its final Jacobian) is compared with geoback's
 C_p. Floors (issue): >= 10x fewer factorisations and >= 5x less time for geoback.
 
@@ -51,50 +51,43 @@ def loaded_case(scale: float):
     return LoadedCase(case_from_data(data), PAPER_CASE, {})
 
 
-def drop_factorisation(problem) -> None:
-    """Forget (and free) the problem's factorisation: the next solve factorises K again."""
-    problem.forget_factorisation()
-
-
 def run_geoback(loaded) -> dict:
-    from geoback.identification import run_case
+    from geoback.run import run_case
 
     with tempfile.TemporaryDirectory() as out:
         c0, t0 = time.process_time(), time.perf_counter()
         res = run_case(loaded, Path(out))
         seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
-    pr = res.problem
+        summary = __import__("json").loads((Path(out) / "summary.json").read_text())
     parts = res.seconds
     outputs = seconds - parts.get("setup", 0.0) - parts.get("fit", 0.0) - parts.get("assess", 0.0)
-    return dict(seconds=seconds, cpu=cpu, setup=parts.get("setup", float("nan")), outputs=outputs, fit_seconds=res.seconds.get("fit", float("nan")), p=res.fit.p,
-                status=res.fit.status, iterations=res.fit.iterations, factorisations=pr.counters.factorisations,
-                solves=pr.counters.solves, forward_runs=pr.counters.forward_runs, dofs=pr.fe.ndof,
-                covariance=res.reliability.covariance, weighting=res.objective.weighting,
-                backend=pr._factor[1].backend if pr._factor else "?",
-                factor_seconds=pr.counters.seconds_factorising, solve_seconds=pr.counters.seconds_solving)
+    return dict(seconds=seconds, cpu=cpu, setup=parts.get("setup", float("nan")), outputs=outputs,
+                fit_seconds=res.seconds.get("fit", float("nan")), p=res.fit.p,
+                status=res.fit.status, iterations=res.fit.iterations, factorisations=res.counts["factorisations"],
+                solves=res.counts["solves"], forward_runs=res.counts["forward_runs"], dofs=res.dofs,
+                covariance=res.reliability.covariance, weighting=res.weighting, backend=res.solver or "?",
+                field_work=summary.get("exploration", {}))
 
 
 def run_scipy(loaded, ls_method: str) -> dict:
-    from scipy.linalg import solve_triangular
     from scipy.optimize import least_squares
 
-    from geoback.estimate import Objective
-    from geoback.problem import Problem
+    from geoback.identification import prepare
 
     c0, t0 = time.process_time(), time.perf_counter()
-    problem = Problem(loaded)
-    objective = Objective(problem, loaded.case.fit.weighting)  # the same whitening L as geoback
-    L, measured = objective.L, objective.measured
-    p0 = problem.params.initial.copy()
+    problem = prepare(loaded)
+    misfit = problem.misfit  # the same readings and whitening as geoback
+    sim = problem.simulation
+    p0 = problem.parameters.initial.copy()
     scale = np.abs(p0)
     calls = {"n": 0}
 
     def fun(z):
         calls["n"] += 1
-        drop_factorisation(problem)  # an external code refactorises for every forward run
-        return solve_triangular(L, measured - problem.predict(z * scale), lower=True)
+        sim.release()  # an external code refactorises for every forward run
+        return misfit.evaluate(z * scale).r
 
-    lo, hi = problem.params.lower / scale, problem.params.upper / scale
+    lo, hi = problem.parameters.lower / scale, problem.parameters.upper / scale
     t1 = time.perf_counter()
     if ls_method == "lm":
         ls = least_squares(fun, p0 / scale, jac="2-point", method="lm")
@@ -103,10 +96,10 @@ def run_scipy(loaded, ls_method: str) -> dict:
     t2, cpu = time.perf_counter(), time.process_time() - c0
     J = ls.jac / scale
     cov = np.linalg.inv(J.T @ J)
-    drop_factorisation(problem)
+    sim.release()
     return dict(seconds=t2 - t0, cpu=cpu, fit_seconds=t2 - t1, p=ls.x * scale, status=ls.message, success=ls.success,
-                calls=calls["n"], factorisations=problem.counters.factorisations, solves=problem.counters.solves,
-                nfev=ls.nfev, njev=ls.njev, covariance=cov, dofs=problem.fe.ndof)
+                calls=calls["n"], factorisations=sim.counters.factorisations, solves=sim.counters.solves,
+                nfev=ls.nfev, njev=ls.njev, covariance=cov, dofs=sim.dofs)
 
 
 def rel_frobenius(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
@@ -152,11 +145,12 @@ def main(argv: list[str] | None = None) -> dict:
         ("geoback run: wall time (setup + fit + assess + outputs) [s]", round(g["seconds"], 2)),
         ("geoback run: fit only [s]", round(g["fit_seconds"], 2)),
         ("geoback run: CPU time, all threads [s]", round(g["cpu"], 2)),
-        ("geoback run: Problem build / writing outputs [s]", f"{g['setup']:.2f} / {g['outputs']:.2f}"),
+        ("geoback run: preparing / writing outputs [s]", f"{g['setup']:.2f} / {g['outputs']:.2f}"),
         ("geoback: factorisations", g["factorisations"]),
         ("geoback: solves (right-hand sides)", g["solves"]),
         ("geoback: forward runs / iterations", f"{g['forward_runs']} / {g['iterations']}"),
-        ("geoback: seconds factorising / solving", f"{g['factor_seconds']:.2f} / {g['solve_seconds']:.2f}"),
+        ("geoback: field file (exploration) factorisations / solves",
+         f"{g['field_work'].get('factorisations', 0)} / {g['field_work'].get('solves', 0)}"),
         ("geoback: E, K0", f"{g['p'][0]:.6g}, {g['p'][1]:.6g} ({g['status']})"),
         (f"least_squares({args.ls_method}, 2-point): wall time (setup + fit) [s]", round(s["seconds"], 2)),
         ("least_squares: fit only [s]", round(s["fit_seconds"], 2)),

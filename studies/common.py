@@ -11,8 +11,8 @@ Conventions of the studies
 * Truth: the ground values of the paper case (E = 10 MPa, K0 = 1).
 * Readings without the inverse crime: noise-free readings come from the same case meshed
   ``refine`` times finer (``geoback.simulate.synthetic_readings``), noise is added by the study.
-* One ``Problem`` per layout and mesh: the noise realisations only change
-  ``problem.obs.measured``; the factorisation of k (K = E k) is reused by every fit.
+* One prepared case per layout and mesh: the noise realisations only change its readings
+  (``Analysis.with_readings``); the factorisation of k (K = E k) is reused by every fit.
 """
 from __future__ import annotations
 
@@ -110,13 +110,13 @@ def wall_points(n: int, radius: float = 3.0, axis_depth: float = 10.0, offset: f
 
 
 # ---------------------------------------------------------------------------- readings
-def block_order(problem) -> list[str]:
-    return [b.name for b in problem.obs.blocks]
+def block_order(analysis) -> list[str]:
+    return [b.name for b in analysis.simulation.survey.blocks]
 
 
-def stack(problem, readings: dict[str, np.ndarray]) -> np.ndarray:
-    """Readings by instrument name -> one vector in the problem's reading order."""
-    return np.concatenate([np.asarray(readings[n], float) for n in block_order(problem)])
+def stack(analysis, readings: dict[str, np.ndarray]) -> np.ndarray:
+    """Readings by instrument name -> one vector in the case's reading order."""
+    return np.concatenate([np.asarray(readings[n], float) for n in block_order(analysis)])
 
 
 def fine_readings(loaded, refine: float = 2.0) -> dict[str, np.ndarray]:
@@ -126,29 +126,28 @@ def fine_readings(loaded, refine: float = 2.0) -> dict[str, np.ndarray]:
     return synthetic_readings(loaded, refine=refine)
 
 
-def problem_with(loaded, measured: np.ndarray | None = None):
-    """A Problem for the case; its readings replaced by `measured` if given."""
-    from geoback.problem import Problem
+def problem_with(loaded, measured: np.ndarray | None = None, weighting: str | None = None):
+    """The case prepared (geoback.identification.prepare) with the readings `measured` (survey order);
+    the truth's own noise-free predictions if none are given."""
+    from geoback.identification import prepare
 
-    pr = Problem(loaded)
-    if measured is not None:
-        pr.obs.measured = np.asarray(measured, float).copy()
-    return pr
-
-
-def noise_from_cx(problem, rng: np.random.Generator, scale: float = 1.0) -> np.ndarray:
-    """A draw from N(0, C_x) of the problem's instruments (C_x = L L^t, eqn 9)."""
-    return scale * (problem.obs.chol @ rng.standard_normal(problem.obs.m))
+    analysis = prepare(loaded, with_readings=False)
+    if measured is None:
+        measured = analysis.predict(P_TRUE).x
+    return analysis.with_readings(measured, weighting)
 
 
-def identify_p(problem, weighting: str, p0=None):
-    """Fit and assess on the problem's current readings; returns (Fit, Reliability)."""
-    from geoback.estimate import Objective, fit
-    from geoback.identification import reliability_of
+def noise_from_cx(analysis, rng: np.random.Generator, scale: float = 1.0) -> np.ndarray:
+    """A draw from N(0, C_x) of the case's instruments (eqn 9)."""
+    return analysis.misfit.data.noise(rng, scale)
 
-    result = fit(problem, weighting=weighting, p0=p0)
-    rel = reliability_of(problem, result, Objective(problem, weighting))
-    return result, rel
+
+def identify_p(analysis, weighting: str, p0=None):
+    """Fit and assess on the analysis' readings; returns (Fit, Reliability)."""
+    from geoback.identification import identify
+
+    res = identify(analysis, weighting=weighting, p0=p0)
+    return res.fit, res.reliability
 
 
 # ---------------------------------------------------------------------------- output

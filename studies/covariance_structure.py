@@ -51,13 +51,13 @@ def slope_noise(rng: np.random.Generator, lengths: np.ndarray) -> np.ndarray:
 def run(realisations: int, small: bool = False, seed: int = 0) -> dict:
     loaded = C.loaded_case(case_data(0.5 if small else 1.0))
     problem = C.problem_with(loaded)
-    lengths = problem.obs.blocks[0].lengths
+    lengths = problem.simulation.survey.blocks[0].lengths
     clean = C.stack(problem, C.fine_readings(loaded, refine=2.0))
 
     # discretisation bias: noise-free fine-mesh readings, both weightings
     bias = {}
     for w in WEIGHTINGS:
-        problem.obs.measured = clean.copy()
+        problem = problem.with_readings(clean)
         f, _ = C.identify_p(problem, w)
         bias[w] = f.p - C.P_TRUE
 
@@ -67,7 +67,7 @@ def run(realisations: int, small: bool = False, seed: int = 0) -> dict:
     cp_std = np.empty((realisations, 2))
     t0 = time.perf_counter()
     for k in range(realisations):
-        problem.obs.measured = clean + slope_noise(rng, lengths)
+        problem = problem.with_readings(clean + slope_noise(rng, lengths))
         for w in WEIGHTINGS:
             f, rel = C.identify_p(problem, w)
             est[w][k] = f.p
@@ -75,8 +75,8 @@ def run(realisations: int, small: bool = False, seed: int = 0) -> dict:
             if w == "full":
                 cp_std[k] = rel.std
     seconds = time.perf_counter() - t0
-    return dict(est=est, ok=ok, bias=bias, cp_std=cp_std, seconds=seconds, dofs=problem.fe.ndof,
-                factorisations=problem.counters.factorisations, realisations=realisations)
+    return dict(est=est, ok=ok, bias=bias, cp_std=cp_std, seconds=seconds, dofs=problem.simulation.dofs,
+                factorisations=problem.simulation.counters.factorisations, realisations=realisations)
 
 
 def summarise(res: dict) -> list[dict]:

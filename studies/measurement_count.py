@@ -53,8 +53,8 @@ def std_at_truth(problem) -> tuple[np.ndarray, object]:
     """std of the parameters from C_p at the truth (reliability module, full C_x = sigma^2 I)."""
     from geoback.reliability import assess
 
-    x, A = problem.predict_with_sensitivity(C.P_TRUE)
-    rel = assess(problem.params.names, C.P_TRUE, A, np.zeros_like(x), problem.obs.chol)
+    at_truth = problem.with_readings(problem.predict(C.P_TRUE).x, "full").misfit
+    rel = assess(at_truth.evaluate(C.P_TRUE, jacobian=True), at_truth.parameters, at_truth.logdet)
     return rel.std, rel
 
 
@@ -66,15 +66,15 @@ def run(small: bool = False) -> list[dict]:
             data = C.case_dict(instruments, mesh_scale=scale, name=f"count-{m}")
             loaded = C.loaded_case(data)
             problem = C.problem_with(loaded)
-            assert problem.obs.m == m, (m, problem.obs.m)
+            assert problem.misfit.m == m, (m, problem.misfit.m)
             std, rel = std_at_truth(problem)
             # identification from noise-free readings of a 2x finer mesh (discretisation bias only)
-            problem.obs.measured = C.stack(problem, C.fine_readings(loaded, refine=2.0))
+            problem = problem.with_readings(C.stack(problem, C.fine_readings(loaded, refine=2.0)))
             fit, _ = C.identify_p(problem, "full")
             rows.append(dict(readings=m, sigma_m=sigma, std_E_kPa=std[0], std_K0=std[1],
                              std_E_per_sigma=std[0] / sigma, std_K0_per_sigma=std[1] / sigma,
                              corr_E_K0=rel.correlation[0, 1], E_hat_kPa=fit.p[0], K0_hat=fit.p[1],
-                             iterations=fit.iterations, status=fit.status, dofs=problem.fe.ndof))
+                             iterations=fit.iterations, status=fit.status, dofs=problem.simulation.dofs))
     return rows
 
 

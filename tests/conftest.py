@@ -17,13 +17,13 @@ def paper_case_path() -> Path:
     return CASES / "tunnel-paper.yaml"
 
 
-def central_difference_error(problem, p, A, j: int, h: float) -> float:
+def central_difference_error(analysis, p, A, j: int, h: float) -> float:
     """Relative difference between column j of the exact sensitivity A = dx/dp at p and the
-    central finite difference with step h."""
+    central finite difference with step h (analysis: a prepared case, geoback.identification)."""
     import numpy as np
 
     up, down = p.copy(), p.copy()
     up[j] += h
     down[j] -= h
-    fd = (problem.predict(up) - problem.predict(down)) / (2 * h)
+    fd = (analysis.predict(up).x - analysis.predict(down).x) / (2 * h)
     return float(np.linalg.norm(fd - A[:, j]) / np.linalg.norm(A[:, j]))

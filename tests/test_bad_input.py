@@ -29,7 +29,7 @@ from hypothesis import strategies as st
 
 from geoback.case import case_from_data, load_case
 from geoback.errors import CaseError, GeobackError
-from geoback.problem import Problem
+from geoback.identification import prepare
 
 ROOT = Path(__file__).resolve().parents[1]
 BAD = ROOT / "tests" / "data" / "bad"
@@ -94,7 +94,7 @@ def test_enough_distinct_bad_cases():
 def test_paper_case_is_valid():
     """The bad cases are the paper case with one mistake: the paper case itself must pass."""
     loaded = load_case(PAPER)
-    Problem(loaded)
+    prepare(loaded)
 
 
 @pytest.mark.parametrize("command", COMMANDS)
@@ -194,7 +194,7 @@ def _check_mutant(data, folder: Path) -> None:
     path.write_text(yaml.safe_dump(data, sort_keys=False, allow_unicode=True), encoding="utf-8")
     try:
         loaded = load_case(path)
-        Problem(loaded)
+        prepare(loaded)
     except GeobackError as exc:
         message = str(exc)
         assert "\n" not in message, message
@@ -229,7 +229,7 @@ def test_no_instruments_error_is_located(tmp_path):
     path = tmp_path / "no-instruments.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
     with pytest.raises(GeobackError) as info:
-        Problem(load_case(path))
+        prepare(load_case(path))
     assert re.match(rf"^{re.escape(str(path))}:\d+:\d+: instruments: ", str(info.value)), str(info.value)
 
 

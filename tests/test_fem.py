@@ -21,7 +21,7 @@ from geoback.case import LoadedCase, case_from_data
 from geoback.fem import FEModel
 from geoback.ground import plane_strain_isotropic
 from geoback.mesh import build_mesh
-from geoback.problem import Problem
+from geoback.identification import prepare
 from geoback.solver import Factorisation, available_backends
 
 
@@ -149,23 +149,23 @@ def test_one_layer_readings_are_a_plus_k0_b_over_e(geoback_cache):
     ]
     parameters = [dict(name="E", initial=5.0e3), dict(name="K0", initial=0.5)]
     case = case_from_data(tunnel_data(instruments=instruments, parameters=parameters))
-    problem = Problem(LoadedCase(case, None, {}))
-    assert problem.params.names == ["E[clay]", "K0"]
+    problem = prepare(LoadedCase(case, None, {}))
+    assert problem.parameters.names == ["E[clay]", "K0"]
 
     E1, K1, K2 = 5.0e3, 0.5, 1.5
-    x1 = problem.predict(np.array([E1, K1]))
-    x2 = problem.predict(np.array([E1, K2]))
+    x1 = problem.predict(np.array([E1, K1])).x
+    x2 = problem.predict(np.array([E1, K2])).x
     b = E1 * (x2 - x1) / (K2 - K1)
     a = E1 * x1 - K1 * b
     assert np.abs(b).max() > 1e-3 * np.abs(a).max()  # K0 really matters
 
     for E3, K3 in ((2.3e4, 0.8), (7.1e2, 2.7)):
-        x3 = problem.predict(np.array([E3, K3]))
+        x3 = problem.predict(np.array([E3, K3])).x
         expected = (a + K3 * b) / E3
         assert np.abs(x3 - expected).max() <= 1e-10 * np.abs(x3).max()
 
     # E scales K only: a single factorisation served every prediction (eqn 41)
-    assert problem.counters.factorisations == 1
+    assert problem.simulation.counters.factorisations == 1
 
 
 def test_one_layer_sensitivities_follow_the_structure(geoback_cache):
@@ -174,15 +174,16 @@ def test_one_layer_sensitivities_follow_the_structure(geoback_cache):
                         sigma=0.001)]
     parameters = [dict(name="E", initial=5.0e3), dict(name="K0", initial=0.5)]
     case = case_from_data(tunnel_data(instruments=instruments, parameters=parameters))
-    problem = Problem(LoadedCase(case, None, {}))
+    problem = prepare(LoadedCase(case, None, {}))
     E, K0 = 8.0e3, 0.7
-    x, A = problem.predict_with_sensitivity(np.array([E, K0]))
-    x_h = problem.predict(np.array([E, K0 + 1.0]))
+    pred = problem.predict(np.array([E, K0]), sensitivities=True)
+    x, A = pred.x, pred.A
+    x_h = problem.predict(np.array([E, K0 + 1.0])).x
     b = E * (x_h - x)  # exact, x is linear in K0
     scale = np.abs(x).max()
     assert np.abs(A[:, 0] + x / E).max() <= 1e-10 * scale / E
     assert np.abs(A[:, 1] - b / E).max() <= 1e-10 * np.abs(b / E).max()
-    assert problem.counters.factorisations == 1
+    assert problem.simulation.counters.factorisations == 1
 
 
 # ---------------------------------------------------------------------------- mesh determinism and cache

@@ -8,23 +8,23 @@ import pytest
 
 from geoback.case import LoadedCase, case_from_data, load_case
 from geoback.estimate import fit
-from geoback.identification import identify, run_case
-from geoback.problem import Problem
+from geoback.identification import identify, prepare
+from geoback.run import run_case
 
 
 @pytest.fixture(scope="module")
 def paper_problem():
     from conftest import CASES
 
-    return Problem(load_case(CASES / "tunnel-paper.yaml"))
+    return prepare(load_case(CASES / "tunnel-paper.yaml"))
 
 
 @pytest.mark.parametrize("method", ["gn", "lm", "lm-scaled"])
 @pytest.mark.parametrize("weighting", ["identity", "full"])
 def test_paper_example_reaches_truth(paper_problem, method, weighting):
     """From E = 5 MPa, K0 = 0.5 to E = 10 MPa, K0 = 1 (readings from a 2x finer mesh, no noise)."""
-    before = paper_problem.counters.factorisations
-    res = fit(paper_problem, method=method, weighting=weighting)
+    before = paper_problem.simulation.counters.factorisations
+    res = fit(paper_problem.misfit.with_weighting(weighting), paper_problem.settings, method=method)
     E, K0 = res.p
     assert res.status == "converged", res.reason
     assert abs(E / 10000 - 1) < 0.005
@@ -32,7 +32,7 @@ def test_paper_example_reaches_truth(paper_problem, method, weighting):
     assert res.iterations <= 8
     assert res.history[0].p[0] == 5000 and res.history[0].p[1] == 0.5
     # K = E k: the factorisation of k made for the first fit serves every later one (eqns 41-42)
-    assert paper_problem.counters.factorisations == max(before, 1)
+    assert paper_problem.simulation.counters.factorisations == max(before, 1)
 
 
 def test_run_writes_outputs_with_one_factorisation(paper_case_path, tmp_path):
@@ -47,13 +47,13 @@ def test_run_writes_outputs_with_one_factorisation(paper_case_path, tmp_path):
     assert 1 <= summary["solves"] <= 3 < summary["forward_runs"]
     assert abs(summary["parameters"]["E[clay]"]["estimate"] / 10000 - 1) < 0.005
     rows = (tmp_path / "readings.csv").read_text().splitlines()
-    assert len(rows) == 1 + res.problem.obs.m
+    assert len(rows) == 1 + res.data.m
 
 
 def test_information_density_is_a_projector(paper_problem):
-    res = identify(paper_problem.loaded, problem=paper_problem)
+    res = identify(paper_problem)
     Q = res.reliability.information_density
-    n = paper_problem.params.n
+    n = paper_problem.parameters.n
     assert np.allclose(Q, Q.T, atol=1e-12)
     assert np.allclose(Q @ Q, Q, atol=1e-10)
     assert np.trace(Q) == pytest.approx(n, rel=1e-10)
@@ -62,16 +62,18 @@ def test_information_density_is_a_projector(paper_problem):
 
 def test_covariance_is_inverse_fisher_and_scales_with_sigma(paper_problem):
     """C_p = (A'^t A')^-1 (eqn 55): check against a direct computation, and C_p ∝ sigma^2."""
-    res = identify(paper_problem.loaded, problem=paper_problem)
+    res = identify(paper_problem)
     A = res.fit.A
-    C = res.objective.C
+    C = res.data.covariance
     direct = np.linalg.inv(A.T @ np.linalg.solve(C, A))
     assert np.allclose(res.reliability.covariance, direct, rtol=1e-8)
+    from geoback.misfit import Data, Misfit
     from geoback.reliability import assess
 
-    L = res.objective.L
-    r = res.objective.measured - res.fit.x
-    doubled = assess(paper_problem.params.names, res.fit.p, A, 2 * r, 2 * L)
+    mis = paper_problem.misfit  # the same readings with every sigma doubled: C_x -> 4 C_x
+    data4 = Data(mis.data.blocks, mis.data.measured, 4 * mis.data.covariance, mis.data.labels)
+    mis4 = Misfit(mis.simulation, data4, mis.parameters, mis.base_values, "full")
+    doubled = assess(mis4.evaluate(res.fit.p, jacobian=True), mis4.parameters, mis4.logdet)
     assert np.allclose(doubled.std, 2 * res.reliability.std, rtol=1e-10)
 
 
@@ -84,22 +86,22 @@ def _paper_dict(paper_case_path):
 def test_prior_enters_covariance(paper_case_path):
     data = _paper_dict(paper_case_path)
     data["parameters"][1]["prior"] = {"mean": 1.0, "std": 0.01}
-    problem = Problem(LoadedCase(case_from_data(data), paper_case_path, {}))
-    res = identify(problem.loaded, problem=problem)
-    A, C = res.fit.A, problem.obs.covariance
+    problem = prepare(LoadedCase(case_from_data(data), paper_case_path, {}))
+    res = identify(problem)
+    A, C = res.fit.A, problem.misfit.data.covariance
     info = A.T @ np.linalg.solve(C, A) + np.diag([0.0, 1 / 0.01 ** 2])
     assert np.allclose(res.reliability.covariance, np.linalg.inv(info), rtol=1e-8)
     assert res.reliability.std[1] < 0.01
-    assert res.reliability.dof == problem.obs.m - 2 + 1
+    assert res.reliability.dof == problem.misfit.m - 2 + 1
 
 
 def test_log_transform_reaches_same_optimum(paper_case_path, paper_problem):
     data = _paper_dict(paper_case_path)
     for p in data["parameters"]:
         p["log"] = True
-    problem = Problem(LoadedCase(case_from_data(data), paper_case_path, {}))
-    a = fit(problem, method="lm")
-    b = fit(paper_problem, method="lm")
+    problem = prepare(LoadedCase(case_from_data(data), paper_case_path, {}))
+    a = fit(problem.misfit, problem.settings, method="lm")
+    b = fit(paper_problem.misfit, paper_problem.settings, method="lm")
     assert np.allclose(a.p, b.p, rtol=1e-5)
 
 
@@ -108,8 +110,8 @@ def test_undetermined_combination_is_named(paper_case_path):
     data = _paper_dict(paper_case_path)
     data["parameters"] = [{"name": "E", "initial": 8000}, {"name": "beta", "initial": 0.8},
                           {"name": "K0", "initial": 0.8}]
-    problem = Problem(LoadedCase(case_from_data(data), paper_case_path, {}))
-    res = identify(problem.loaded, problem=problem)
+    problem = prepare(LoadedCase(case_from_data(data), paper_case_path, {}))
+    res = identify(problem)
     rel = res.reliability
     assert rel.undetermined, "E and beta should be reported as not separately determined"
     text = rel.undetermined[0]

@@ -10,8 +10,7 @@ import yaml
 from conftest import CASES
 from geoback import covariance as cov
 from geoback.case import LoadedCase, case_from_data
-from geoback.estimate import Objective
-from geoback.problem import Problem
+from geoback.identification import prepare
 
 
 def _paper():
@@ -19,12 +18,11 @@ def _paper():
 
 
 def _problem(data):
-    return Problem(LoadedCase(case_from_data(data), CASES / "tunnel-paper.yaml", {}))
+    return prepare(LoadedCase(case_from_data(data), CASES / "tunnel-paper.yaml", {}))
 
 
 def _J(problem, p):
-    o = Objective(problem)
-    return o.J(o.evaluate(problem.params.to_internal(p) / o.scale, False)[3])
+    return problem.misfit.J(p)
 
 
 def test_primary_readings_give_the_same_objective():
@@ -43,11 +41,11 @@ def test_primary_readings_give_the_same_objective():
         p = np.array(p)
         J_disp, J_prim = _J(disp, p), _J(prim, p)
         # J from the slopes directly: sum over intervals of (alpha* - alpha(p))^2 / sigma^2 + extensometer part
-        x = prim.predict(p)
+        x = prim.predict(p).x
         m1 = len(slopes)
         alpha = np.linalg.solve(W, x[:m1])
-        r2 = prim.obs.measured[m1:] - x[m1:]
-        C2 = prim.obs.covariance[m1:, m1:]
+        r2 = prim.misfit.data.measured[m1:] - x[m1:]
+        C2 = prim.misfit.data.covariance[m1:, m1:]
         J_direct = np.sum((slopes - alpha) ** 2) / inc["sigma"] ** 2 + r2 @ np.linalg.solve(C2, r2)
         assert abs(J_prim / J_disp - 1) < 1e-10
         assert abs(J_direct / J_disp - 1) < 1e-10
@@ -62,15 +60,16 @@ def test_linewise_and_chord_operators_match_the_field():
          "stations": 5, "sigma": 1e-5},
         {"name": "C1", "kind": "convergence", "points": [[3.0, -10.0], [0.0, -7.0]], "sigma": 1e-4},
     ]
-    pr = Problem(LoadedCase(case_from_data(data), CASES / "tunnel-paper.yaml", {}), with_readings=False)
-    u = pr.fe.expand(pr.displacement(pr.values)).reshape(-1, 2)
-    x = pr.obs.P @ pr.displacement(pr.values)
-    labels = pr.obs.labels
-    nodes = pr.mesh.nodes
+    pr = prepare(LoadedCase(case_from_data(data), CASES / "tunnel-paper.yaml", {}), with_readings=False)
+    sim = pr.simulation
+    u = sim.fe.expand(sim.displacement(pr.values)).reshape(-1, 2)
+    x = pr.predict(pr.parameters.initial).x
+    labels = sim.survey.labels
+    nodes = sim.mesh.nodes
 
     def at(point):  # displacement at a mesh node coinciding with the point, or interpolated
-        Ix, Iy = pr.fe.interpolation(np.array([point]))
-        uf = pr.displacement(pr.values)
+        Ix, Iy = sim.fe.interpolation(np.array([point]))
+        uf = sim.displacement(pr.values)
         return np.array([(Ix @ uf)[0], (Iy @ uf)[0]])
 
     rows = {(lab.instrument, lab.station): i for i, lab in enumerate(labels)}
@@ -87,8 +86,8 @@ def test_linewise_and_chord_operators_match_the_field():
     assert np.isclose(x[rows[("C1", 1)]], (at(b) - at(a)) @ chord, rtol=1e-12, atol=1e-15)
     # interpolation reproduces nodal values exactly at a mesh node
     n = 17
-    Ix, Iy = pr.fe.interpolation(nodes[[n]])
-    uf = pr.displacement(pr.values)
+    Ix, Iy = sim.fe.interpolation(nodes[[n]])
+    uf = sim.displacement(pr.values)
     assert np.allclose([(Ix @ uf)[0], (Iy @ uf)[0]], u[n], rtol=1e-12, atol=1e-16)
 
 

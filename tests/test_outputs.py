@@ -1,7 +1,6 @@
 """Result files of `geoback run`: reproducible byte for byte, written atomically, always written."""
 from __future__ import annotations
 
-import copy
 import csv
 import io
 import json
@@ -16,8 +15,10 @@ import yaml
 
 import geoback.outputs
 from geoback.case import load_case
-from geoback.identification import identify, run_case
+from geoback.explore import explore
+from geoback.identification import identify, prepare
 from geoback.report import write_run
+from geoback.run import run_case
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "cases" / "tunnel-paper.yaml"
@@ -112,9 +113,10 @@ def test_interrupted_run_leaves_old_or_new_files(tmp_path, cache, monkeypatch):
                             weighting="full" if weighting == "identity" else "identity")
     old, new = tmp_path / "old", tmp_path / "new"
     run_case(load_case(old_case), old)
-    result = identify(load_case(PAPER))  # identified once; written again for every n below
-    counters = copy.copy(result.problem.counters)  # writing field.vtu adds a solve to them
-    write_run(result, new)
+    analysis = prepare(load_case(PAPER))
+    result = identify(analysis)  # identified once; written again for every n below
+    exploration = explore(analysis.misfit, result, ("field",))  # writing reads it and runs no model
+    write_run(result, new, exploration)
     names = sorted(p.name for p in new.iterdir())
     assert sorted(p.name for p in old.iterdir()) == names
     for name in names:
@@ -135,9 +137,8 @@ def test_interrupted_run_leaves_old_or_new_files(tmp_path, cache, monkeypatch):
         out = tmp_path / f"run{n}"
         shutil.copytree(old, out)
         state.update(out=out, left=n)
-        result.problem.counters = copy.copy(counters)
         with pytest.raises(Interrupted):
-            write_run(result, out)
+            write_run(result, out, exploration)
         present = sorted(p.name for p in out.iterdir())
         assert present == names, f"after {n} renames: unexpected files {sorted(set(present) - set(names))}"
         renewed = 0

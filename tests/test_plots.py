@@ -10,7 +10,9 @@ import pytest
 
 from geoback import plots
 from geoback.case import load_case
-from geoback.identification import identify
+from geoback.explore import explore
+from geoback.identification import identify, prepare
+from geoback.plots.common import nice_factor
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_CASE = ROOT / "cases" / "tunnel-paper.yaml"
@@ -27,15 +29,25 @@ def cache_dir(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def paper_run(cache_dir, tmp_path_factory):
+def paper_analysis(cache_dir, tmp_path_factory):
     case = tmp_path_factory.mktemp("case") / "tunnel-paper.yaml"
     shutil.copy(PAPER_CASE, case)
-    return identify(load_case(case))
+    return prepare(load_case(case))
 
 
 @pytest.fixture(scope="module")
-def figures(paper_run):
-    figs = plots.build_figures(paper_run)
+def paper_run(paper_analysis):
+    return identify(paper_analysis)
+
+
+@pytest.fixture(scope="module")
+def exploration(paper_analysis, paper_run):
+    return explore(paper_analysis.misfit, paper_run, plots.exploration_for(), paper_analysis.settings)
+
+
+@pytest.fixture(scope="module")
+def figures(paper_run, exploration):
+    figs = plots.build_figures(paper_run, exploration)
     yield figs
     for fig in figs.values():
         fig.clear()
@@ -85,23 +97,27 @@ def test_contours_show_both_methods_and_the_svd_directions(figures, paper_run):
     # the estimate is inside the frame, and so is the start
     x0, x1 = ax.get_xlim()
     y0, y1 = ax.get_ylim()
-    for p in (paper_run.fit.p, paper_run.problem.params.initial):
+    for p in (paper_run.fit.p, paper_run.parameters.initial):
         assert x0 < p[0] / 1e3 < x1 and y0 < p[1] < y1
 
 
-def test_building_figures_leaves_the_run_counters_alone(paper_run):
-    before = dict(vars(paper_run.problem.counters))
-    plots.build_figures(paper_run, names=("convergence", "field"))
-    assert dict(vars(paper_run.problem.counters)) == before
+def test_building_figures_leaves_the_run_counters_alone(paper_analysis, paper_run, exploration):
+    """Figures read the result and the exploration: building them runs no model."""
+    before = dict(vars(paper_analysis.simulation.counters))
+    figs = plots.build_figures(paper_run, exploration)
+    assert list(figs) == list(plots.FIGURES)
+    assert dict(vars(paper_analysis.simulation.counters)) == before
 
 
-def test_batched_objective_equals_single_predictions(paper_run):
+def test_batched_objective_equals_single_predictions(paper_analysis, paper_run, exploration):
+    """The slice's grid values are the objective at those points; at the estimate it is the fit's J."""
+    slc = exploration.slice
     p_hat = paper_run.fit.p
-    P = np.array([p_hat, p_hat * [0.8, 1.1], p_hat * [1.2, 0.7]])
-    batched = plots._J_many(paper_run, P)
-    single = [plots._J(paper_run, p) for p in P]
+    picks = [(0, 0), (len(slc.b) // 2, len(slc.a) // 3), (len(slc.b) - 1, len(slc.a) - 1)]
+    batched = [slc.J[r, c] for r, c in picks]
+    single = [paper_analysis.misfit.J(np.array([slc.a[c], slc.b[r]])) for r, c in picks]
     np.testing.assert_allclose(batched, single, rtol=1e-9)
-    assert batched[0] == pytest.approx(paper_run.fit.J, rel=1e-6)
+    assert paper_analysis.misfit.J(p_hat) == pytest.approx(paper_run.fit.J, rel=1e-6)
 
 
 def test_save_figures_writes_png_and_svg(figures, tmp_path):
@@ -116,16 +132,16 @@ def test_save_figures_writes_png_and_svg(figures, tmp_path):
             assert b"<svg" in data[:2000]
 
 
-def test_unknown_figure_name(paper_run):
+def test_unknown_figure_name(paper_run, exploration):
     with pytest.raises(ValueError, match="unknown figure"):
-        plots.build_figures(paper_run, names=("nope",))
+        plots.build_figures(paper_run, exploration, names=("nope",))
 
 
 def test_nice_factor():
-    assert plots._nice_factor(0.5) == 1.0
-    assert plots._nice_factor(4.6) == 2.0
-    assert plots._nice_factor(10.8) == 10.0
-    assert plots._nice_factor(730.0) == 500.0
+    assert nice_factor(0.5) == 1.0
+    assert nice_factor(4.6) == 2.0
+    assert nice_factor(10.8) == 10.0
+    assert nice_factor(730.0) == 500.0
 
 
 def test_cli_run_with_plots_writes_the_figures(cache_dir, tmp_path):
@@ -149,12 +165,18 @@ def test_cli_run_with_plots_writes_the_figures(cache_dir, tmp_path):
 
 @pytest.mark.slow
 def test_contour_grid_is_capped_when_every_point_refactorises(cache_dir, tmp_path):
-    """With nu identified each grid point needs its own factorisation: 25 x 25, said in the title."""
+    """With nu identified each grid point needs its own factorisation: the grid is sized to a time
+    budget, and the title says so."""
     text = PAPER_CASE.read_text().replace("  - {name: K0, initial: 0.5, bounds: [0.05, 5.0]}",
                                           '  - {name: "nu[clay]", initial: 0.4, bounds: [0.1, 0.495]}')
     case = tmp_path / "nu.yaml"
     case.write_text(text)
-    res = identify(load_case(case))
-    fig = plots.objective_contours_figure(res)
+    analysis = prepare(load_case(case))
+    res = identify(analysis)
+    fig = plots.objective_contours_figure(res, explore(analysis.misfit, res, ("slice",), budget=0.5))
     title = _data_axes(fig)[0].get_title()
-    assert "25×25" in title and "capped" in title
+    assert "capped" in title
+    import re
+
+    size = int(re.search(r"grid (\d+)×\1", title).group(1))
+    assert 9 <= size < 40  # sized to the time budget, not the full 40 x 40

@@ -7,7 +7,7 @@ import yaml
 from conftest import CASES, central_difference_error
 from geoback.case import LoadedCase, case_from_data
 from geoback.ground import plane_strain_cross_anisotropic, plane_strain_isotropic
-from geoback.problem import Problem
+from geoback.identification import prepare
 
 
 @pytest.fixture(scope="module")
@@ -21,13 +21,13 @@ def problem():
         {"name": "m[clay]", "initial": 0.9}, {"name": "K0grad", "initial": 0.02}, {"name": "beta", "initial": 0.8},
         {"name": "Esplit[clay]", "initial": 15000.0}]
     loaded = LoadedCase(case_from_data(data), CASES / "concealed" / "x.yaml", {})
-    return Problem(loaded, with_readings=False, extra_values={"zsplit[clay]": 18.0})
+    return prepare(loaded, with_readings=False, values={"zsplit[clay]": 18.0})
 
 
 def test_extension_sensitivities_match_central_differences(problem):
-    p = problem.params.initial.copy()
-    _, A = problem.predict_with_sensitivity(p)
-    for j, name in enumerate(problem.params.names):
+    p = problem.parameters.initial.copy()
+    A = problem.predict(p, sensitivities=True).A
+    for j, name in enumerate(problem.parameters.names):
         err = central_difference_error(problem, p, A, j, 1e-5 * max(abs(p[j]), 1e-2))
         assert err < 1e-6, (name, err)
 

@@ -37,5 +37,5 @@ def test_span_cache_is_bounded():
     B = rng.standard_normal((400, MAX_BASIS + 5))
     X = np.column_stack([f.solve(B[:, j]) for j in range(B.shape[1])])
     assert f.backsubstitutions == B.shape[1]
-    assert f._Q.shape[1] == MAX_BASIS
+    assert f._raw.Q.shape[1] == MAX_BASIS
     assert np.allclose(A @ X, B, atol=1e-10)

@@ -97,28 +97,26 @@ def test_cp_equals_scipy_least_squares_covariance():
     from scipy.optimize import least_squares
 
     import common as C
-    from geoback.identification import identify
+    from geoback.identification import identify, prepare
     from geoback.simulate import synthetic_readings
 
     data = C.case_dict(weighting="full")
     loaded = C.loaded_case(data)
     noisy = synthetic_readings(loaded, refine=2.0, noise_seed=7)
     loaded = C.loaded_case(C.with_readings(data, noisy))
-    res = identify(loaded, weighting="full")
+    problem = prepare(loaded)
+    res = identify(problem, weighting="full")
     assert res.fit.status == "converged"
-    problem = res.problem
     Cp = res.reliability.covariance
 
-    L = problem.obs.chol  # C_x = L L^t, full instrument covariance
-    from scipy.linalg import solve_triangular
-
-    measured = problem.obs.measured
-    scale = np.abs(problem.params.initial)
+    misfit = problem.misfit  # C_x = L L^t, full instrument covariance
+    measured = misfit.data.measured
+    scale = np.abs(problem.parameters.initial)
 
     def whitened_residual(z):
-        return solve_triangular(L, measured - problem.predict(z * scale), lower=True)
+        return misfit.whiten(measured - problem.predict(z * scale).x)
 
-    ls = least_squares(whitened_residual, problem.params.initial / scale, jac="3-point", method="lm",
+    ls = least_squares(whitened_residual, problem.parameters.initial / scale, jac="3-point", method="lm",
                        xtol=1e-12, ftol=1e-12, gtol=1e-12)
     assert ls.success
     J = ls.jac / scale  # d r' / d p in physical units
@@ -158,20 +156,20 @@ def _two_layer_case():
 
 def test_sensitivities_match_central_differences():
     from conftest import central_difference_error
-    from geoback.problem import Problem
+    from geoback.identification import prepare
 
-    problem = Problem(_two_layer_case())
-    names = problem.params.names
+    problem = prepare(_two_layer_case())
+    names = problem.parameters.names
     assert names == ["E[clay]", "E[marl]", "nu[clay]", "K0", "K0[marl]", "B[I1]"]
-    p = problem.params.initial.copy()
-    x, A = problem.predict_with_sensitivity(p)
+    p = problem.parameters.initial.copy()
+    A = problem.predict(p, sensitivities=True).A
     steps = {"E[clay]": 1e-4 * p[0], "E[marl]": 1e-4 * p[1], "nu[clay]": 1e-5, "K0": 1e-4, "K0[marl]": 1e-4,
              "B[I1]": 1e-4}
     for j, name in enumerate(names):
         err = central_difference_error(problem, p, A, j, steps[name])
         assert err < 1e-6, (name, err)
     # B[I1] shifts every inclinometer reading by -1 (x = P u - G c) and nothing else
-    rows_i1 = [i for i, lab in enumerate(problem.obs.labels) if lab.instrument == "I1"]
+    rows_i1 = [i for i, lab in enumerate(problem.simulation.survey.labels) if lab.instrument == "I1"]
     col = A[:, names.index("B[I1]")]
     np.testing.assert_array_equal(col[rows_i1], -1.0)
     assert np.count_nonzero(col) == len(rows_i1)

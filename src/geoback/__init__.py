@@ -2,8 +2,9 @@
 
     from geoback import load_case, identify, diagnose
     loaded = load_case("cases/tunnel-paper.yaml")
-    result = identify(loaded)          # .fit.p, .reliability.covariance, ...
-    diagnosis = diagnose(loaded)       # .accepted, .final_reliability, ...
+    analysis = prepare(loaded)         # mesh, FE model, instruments, readings (optional step)
+    result = identify(loaded)          # result["E[clay]"].value, .std, .interval; result.report()
+    diagnosis = diagnose(loaded)       # .accepted, .final, .baseline
 """
 from __future__ import annotations
 
@@ -11,9 +12,10 @@ __version__ = "0.1.0"
 
 from .case import load_case  # noqa: E402
 
-__all__ = ["load_case", "identify", "run_case", "diagnose", "Problem", "__version__"]
+__all__ = ["load_case", "prepare", "identify", "explore", "run_case", "diagnose", "__version__"]
 
-_LAZY = {"identify": ".identification", "run_case": ".identification", "diagnose": ".diagnosis", "Problem": ".problem"}
+_LAZY = {"prepare": ".identification", "identify": ".identification", "explore": ".explore", "run_case": ".run",
+         "diagnose": ".diagnosis"}
 
 
 def __getattr__(name: str):

@@ -144,7 +144,7 @@ def run_one(path: str, out_dir: str, name: str | None = None, in_worker: bool = 
         except ImportError:
             threadpool_limits = None
         from .case import load_case
-        from .identification import run_case
+        from .run import run_case
 
         loaded = load_case(path)
         row["case"] = loaded.case.name
@@ -155,7 +155,7 @@ def run_one(path: str, out_dir: str, name: str | None = None, in_worker: bool = 
             res = run_case(loaded, Path(out_dir))
         fit = res.fit
         row["status"] = fit.status
-        row["parameters"] = {n: float(v) for n, v in zip(res.problem.params.names, fit.p)}
+        row["parameters"] = {n: float(v) for n, v in zip(res.parameters.names, fit.p)}
         row["reduced_chi2"] = float(res.reliability.reduced_chi2)
         if fit.status != "converged":
             row["message"] = fit.reason

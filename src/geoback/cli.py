@@ -12,7 +12,7 @@ import typer
 
 from .errors import GeobackError
 
-app = typer.Typer(add_completion=False, pretty_exceptions_enable=False, no_args_is_help=True,
+app = typer.Typer(add_completion=False, pretty_exceptions_enable=False, no_args_is_help=True, rich_markup_mode=None,
                   help="Maximum-likelihood back-analysis of tunnel and excavation instrumentation.")
 
 
@@ -42,11 +42,9 @@ def friendly(func):
     return wrapper
 
 
-def _console():
-    """Progress goes to stderr through rich (colour on terminals, plain text in pipes and CI)."""
-    from rich.console import Console
-
-    return Console(stderr=True, soft_wrap=True)
+def _say(message: str) -> None:
+    """Progress on stderr, printed verbatim (names such as E[clay] are never read as markup)."""
+    typer.echo(f"  {message}", err=True)
 
 
 def _load(case: Path):
@@ -68,11 +66,12 @@ def _out_dir(loaded, out: Optional[Path]) -> Path:
 def validate(case: Path = typer.Argument(..., help="case file (YAML)")):
     """Check a case file: schema, physics and instrument positions."""
     loaded = _load(case)  # schema errors first: no heavy imports before them
-    from .problem import Problem
+    from .identification import prepare
 
-    problem = Problem(loaded)
-    typer.echo(f"{case}: valid ({len(loaded.case.instruments)} instruments, {problem.obs.m} readings, "
-               f"{len(loaded.case.parameters)} parameters, {problem.fe.ndof} dofs)")
+    analysis = prepare(loaded)
+    sim = analysis.simulation
+    typer.echo(f"{case}: valid ({len(loaded.case.instruments)} instruments, {sim.survey.m} readings, "
+               f"{len(loaded.case.parameters)} parameters, {sim.dofs} dofs)")
 
 
 @app.command()
@@ -112,7 +111,7 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              seed: int = typer.Option(0, help="seed of the noise"),
              readings_out: Optional[Path] = typer.Option(None, help="write the readings as a CSV usable as readings_file")):
     """Forward run: predicted readings and the field; or study data (--set, --refine, --noise, --readings-out)."""
-    from .problem import Problem
+    from .identification import prepare
     from .simulate import simulate as run_simulation, synthetic_readings, write_readings_csv
 
     loaded = _load(case)
@@ -130,10 +129,10 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
         typer.echo(f"{sum(len(v) for v in readings.values())} readings (mesh x{refine:g} finer"
                    f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
         return
-    problem = Problem(loaded, parameters=[], extra_values=values)  # readings, if any, are listed too
+    analysis = prepare(loaded, parameters=[], values=values, with_readings=False)
     folder = _out_dir(loaded, out)
-    res = run_simulation(problem, folder, vtu=vtu and loaded.case.output.vtu)
-    typer.echo(f"{problem.obs.m} readings predicted on {res['dofs']} dofs -> {folder}/predicted.csv")
+    res = run_simulation(analysis, folder, vtu=vtu and loaded.case.output.vtu)
+    typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs -> {folder}/predicted.csv")
 
 
 @app.command()
@@ -146,13 +145,14 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
     """Is the model adequate? If not: where is the mismatch, what physics is missing, how much better it fits."""
     from .diagnosis import diagnose as run_diagnosis, diagnosis_text, write_diagnosis
     from .diagnosis.report import verdict
+    from .explore import explore
 
     loaded = _load(case)
-    console = _console()
-    say = None if quiet else (lambda msg: console.print(f"  [dim]{msg}[/]", highlight=False))
+    say = None if quiet else _say
     d = run_diagnosis(loaded, alpha=alpha, progress=say)
     folder = _out_dir(loaded, out)
-    write_diagnosis(d, folder, plots=plots)
+    exploration = explore(d.final_misfit, d.final, ("profiles",)) if plots else None
+    write_diagnosis(d, folder, plots=plots, exploration=exploration)
     if not quiet:
         typer.echo(diagnosis_text(d))
     else:
@@ -172,22 +172,24 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
     if method is not None and method not in ("lm", "lm-scaled", "gn"):
         raise GeobackError(f"--method must be lm, lm-scaled or gn, not '{method}'")
     loaded = _load(case)  # schema errors first: no heavy imports before them
-    from .identification import run_case
     from .report import report_text, summary
+    from .run import run_case
 
     folder = _out_dir(loaded, out)
-    names = [p.name for p in loaded.case.parameters]
-
-    console = _console()
+    names: list[str] = []
+    talk = not quiet and not as_json
 
     def progress(it):
-        if not quiet and not as_json:
+        if talk:
             vals = "  ".join(f"{n} = {v:.6g}" for n, v in zip(names, it.p))
-            mark = "[green]accepted[/]" if it.accepted else "[yellow]rejected[/]"
-            console.print(f"  iteration {it.k:2d}  mu = {it.mu:8.2g}  J = {it.J:<12.6g} {mark}  {vals}",
-                          highlight=False)
+            mark = "accepted" if it.accepted else "rejected"
+            _say(f"iteration {it.k:2d}  mu = {it.mu:8.2g}  J = {it.J:<12.6g} {mark}  {vals}")
 
-    res = run_case(loaded, folder, method=method, progress=progress, plots=plots)
+    def named(analysis):
+        names[:] = analysis.parameters.names
+
+    res = run_case(loaded, folder, method=method, progress=progress, plots=plots, say=_say if talk else None,
+                   prepared=named)
     if as_json:
         typer.echo(json.dumps(json.loads((folder / "summary.json").read_text())))
     elif not quiet:

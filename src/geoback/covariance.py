@@ -16,7 +16,7 @@ Conventions
 The closed forms (eqns 12-20) are implemented as independent vectorised
 formulas so that they can be checked against ``sigma^2 W W^t + G diag(var) G^t``
 (eqn 26).  The deflectometer uses the ERRATA-corrected eqns 18-20
-(``/work/shared/paper/ERRATA.md``): the printed inner sums are wrong.
+(see docs/architecture.md): the printed inner sums are wrong.
 
 Pure numpy (and geoback's error classes).
 """

@@ -1,11 +1,12 @@
 """Maximum-likelihood estimation by Gauss-Newton and Levenberg-Marquardt (eqns 6, 27-30).
 
-The whitened problem is minimised: J(p) = ||L^-1 (x* - x(p))||^2 + sum prior terms, with
-C_x = L L^t. Steps are taken in internal coordinates q (ln p for log-transformed parameters)
-scaled by their initial magnitude, so that the paper's mu0 = 10 means the same whatever the
-units: 'lm' adds mu * mean(diag N) * I to N = B^t B (eqn 30), 'lm-scaled' adds mu * diag(N)
-(Marquardt), 'gn' uses mu = 0 (eqn 28) with step halving. mu is multiplied by 10 when J
-rises and divided by 10 when it falls; a step is accepted only if J decreases.
+Minimises J(p) = r(p)^t r(p) of a ``Misfit`` (whitened residuals and prior rows). Steps are
+taken in internal coordinates z = q / scale, with q = ln p for log-transformed parameters and
+scale the initial magnitude, so that the paper's mu0 = 10 means the same whatever the units:
+'lm' adds mu * mean(diag N) * I to N = B^t B (eqn 30), 'lm-scaled' adds mu * diag(N) (Marquardt),
+'gn' uses mu = 0 (eqn 28) with step halving. mu is multiplied by 10 when J rises and divided by
+10 when it falls; a step is accepted only if J decreases. The internal coordinates never leave
+this module: the misfit is evaluated in physical units.
 """
 from __future__ import annotations
 
@@ -13,13 +14,30 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .problem import Problem
-
+from .misfit import Misfit
+from .parameters import ParameterSet
 
 MAX_TRIALS = 12  # trial steps per iteration (mu x10 or step halving each time)
+METHODS = ("lm", "gn", "lm-scaled")
 
 
-@dataclass
+@dataclass(frozen=True)
+class Settings:
+    """Fit settings (the case's ``fit:`` section)."""
+
+    method: str = "lm"
+    max_iterations: int = 30
+    mu0: float = 10.0
+    step_tol: float = 1e-6
+    objective_tol: float = 1e-10
+
+    @classmethod
+    def of(cls, fit_section) -> "Settings":
+        return cls(fit_section.method, fit_section.max_iterations, fit_section.mu0, fit_section.step_tol,
+                   fit_section.objective_tol)
+
+
+@dataclass(frozen=True)
 class Iteration:
     k: int
     mu: float
@@ -40,65 +58,32 @@ class Fit:
     method: str
     iterations: int
     at_bound: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-    counts: dict = field(default_factory=dict)  # factorisations, solves, forward runs (set by identify)
+    moved: bool = True  # did any step get accepted
 
 
-class Objective:
-    """Whitened residuals of the data and of the priors, and their Jacobian in q."""
+class _Coordinates:
+    """z = q / scale with q = ln p (log-transformed) or p."""
 
-    def __init__(self, problem: Problem, weighting: str = "full"):
-        self.problem = problem
-        obs = problem.obs
-        if obs.measured is None:
-            from .errors import GeobackError
+    def __init__(self, params: ParameterSet):
+        self.log = params.log
+        span = np.where(np.isfinite(params.upper - params.lower), (params.upper - params.lower) / 10, 1.0)
+        typical = np.where(params.initial != 0, np.abs(params.initial), span)
+        self.scale = np.where(params.log, 1.0, typical)
+        lo = np.where(params.log, np.log(np.where(params.lower > 0, params.lower, 1.0)), params.lower)
+        hi = np.where(params.log, np.log(np.where(params.upper > 0, params.upper, 1.0)), params.upper)
+        lo = np.where(params.log & ~(params.lower > 0), -np.inf, lo)
+        self.lo, self.hi = lo / self.scale, hi / self.scale
 
-            raise GeobackError("the case has instruments without readings: give 'readings' or 'readings_file' "
-                               "for every instrument to identify parameters")
-        self.measured = obs.measured
-        self.weighting = weighting
-        C = obs.covariance
-        if weighting == "identity":
-            C = np.eye(obs.m)
-        elif weighting == "diagonal":
-            C = np.diag(np.diag(C))
-        self.C = C
-        self.L = np.linalg.cholesky(C) if weighting == "full" else np.diag(np.sqrt(np.diag(C)))
-        self.params = problem.params
-        span = np.where(np.isfinite(self.params.upper - self.params.lower), (self.params.upper - self.params.lower) / 10, 1.0)
-        typical = np.where(self.params.initial != 0, np.abs(self.params.initial), span)
-        self.scale = np.where(self.params.log, 1.0, typical)  # q / scale is O(1) for every parameter
+    def z(self, p: np.ndarray) -> np.ndarray:
+        p = np.asarray(p, float)
+        return np.where(self.log, np.log(np.where(self.log, p, 1.0)), p) / self.scale
 
-    def whiten(self, v: np.ndarray) -> np.ndarray:
-        from scipy.linalg import solve_triangular
+    def p(self, z: np.ndarray) -> np.ndarray:
+        q = np.asarray(z, float) * self.scale
+        return np.where(self.log, np.exp(np.where(self.log, q, 0.0)), q)
 
-        return solve_triangular(self.L, v, lower=True)
-
-    def prior_rows(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        has = self.params.has_prior
-        sq = np.sqrt(self.params.prior_precision())[has]
-        r = sq * (self.params.prior_mean[has] - p[has])
-        Jp = np.zeros((int(has.sum()), len(p)))
-        Jp[np.arange(int(has.sum())), np.flatnonzero(has)] = sq
-        return r, Jp
-
-    def evaluate(self, z: np.ndarray, with_jacobian: bool):
-        """Residual vector r_aug (whitened data, then priors) and B = d x_aug / d z at z = q / scale."""
-        q = z * self.scale
-        p = self.params.to_physical(q)
-        if with_jacobian:
-            x, A = self.problem.predict_with_sensitivity(p)
-        else:
-            x, A = self.problem.predict(p), None
-        rp, Jp = self.prior_rows(p)
-        r = np.concatenate([self.whiten(self.measured - x), rp])
-        B = None
-        if with_jacobian:
-            chain = self.params.dp_dq(q) * self.scale
-            B = np.vstack([self.whiten(A), Jp]) * chain
-        return p, x, A, r, B
-
-    def J(self, r: np.ndarray) -> float:
-        return float(r @ r)
+    def dp_dz(self, z: np.ndarray) -> np.ndarray:
+        return np.where(self.log, self.p(z), 1.0) * self.scale
 
 
 def _solve_step(N: np.ndarray, g: np.ndarray, damping: np.ndarray) -> np.ndarray:
@@ -110,23 +95,25 @@ def _solve_step(N: np.ndarray, g: np.ndarray, damping: np.ndarray) -> np.ndarray
         return np.linalg.lstsq(M, g, rcond=None)[0]
 
 
-def fit(problem: Problem, method: str | None = None, p0: np.ndarray | None = None,
-        max_iterations: int | None = None, weighting: str | None = None, progress=None) -> Fit:
-    """Identify the case's parameters (eqns 27-30); never raises on non-convergence."""
-    settings = problem.case.fit
+def fit(misfit: Misfit, settings: Settings = Settings(), method: str | None = None, p0: np.ndarray | None = None,
+        max_iterations: int | None = None, progress=None) -> Fit:
+    """Identify the misfit's parameters (eqns 27-30); never raises on non-convergence."""
     method = method or settings.method
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, not '{method}'")
     max_iterations = max_iterations or settings.max_iterations
-    obj = Objective(problem, weighting or settings.weighting)
-    params = problem.params
-    lo_q, hi_q = params.internal_bounds()
-    lo, hi = lo_q / obj.scale, hi_q / obj.scale
-    z = params.to_internal(params.initial if p0 is None else p0) / obj.scale
-    p, x, A, r, B = obj.evaluate(z, True)
-    J = obj.J(r)
+    params = misfit.parameters
+    co = _Coordinates(params)
+    lo, hi = co.lo, co.hi
+    z = co.z(params.initial if p0 is None else p0)
+    ev = misfit.evaluate(co.p(z), jacobian=True)
+    J = ev.J
+    B = ev.B * co.dp_dz(z)
     mu = 0.0 if method == "gn" else settings.mu0
-    history = [Iteration(0, mu, J, p.copy(), True)]
+    history = [Iteration(0, mu, J, ev.p.copy(), True)]
     status, reason = "not converged", f"maximum number of iterations ({max_iterations}) reached"
     k = 0
+    moved = False
 
     def damping(N):
         if method == "lm":
@@ -137,7 +124,7 @@ def fit(problem: Problem, method: str | None = None, p0: np.ndarray | None = Non
 
     while k < max_iterations:
         k += 1
-        N, g = B.T @ B, B.T @ r
+        N, g = B.T @ B, B.T @ ev.r
         step = _solve_step(N, g, damping(N))
         predicted = 2 * g @ step - step @ N @ step  # decrease of J predicted by the linear model
         if predicted <= settings.objective_tol * J:
@@ -147,8 +134,8 @@ def fit(problem: Problem, method: str | None = None, p0: np.ndarray | None = Non
         accepted = False
         for _trial in range(MAX_TRIALS):
             z_new = np.clip(z + step, lo, hi)
-            p_new, _, _, r_new, _ = obj.evaluate(z_new, False)
-            J_new = obj.J(r_new)
+            p_new = co.p(z_new)
+            J_new = misfit.J(p_new)
             accepted = J_new < J
             history.append(Iteration(k, mu, J_new, p_new.copy(), accepted))
             if progress:
@@ -163,12 +150,14 @@ def fit(problem: Problem, method: str | None = None, p0: np.ndarray | None = Non
         if not accepted:
             status, reason = "converged", "no step decreases J any more (minimum to working precision)"
             break
+        moved = True
         dz = z_new - z
         dJ = (J - J_new) / max(J, 1e-300)
         z, J = z_new, J_new
         if method != "gn":
             mu /= 10
-        p, x, A, r, B = obj.evaluate(z, True)
+        ev = misfit.evaluate(co.p(z), jacobian=True)
+        B = ev.B * co.dp_dz(z)
         rel_step = np.max(np.abs(dz) / np.maximum(np.abs(z), 1e-12))
         if rel_step < settings.step_tol:
             status, reason = "converged", f"relative step {rel_step:.1e} below {settings.step_tol:g}"
@@ -179,4 +168,4 @@ def fit(problem: Problem, method: str | None = None, p0: np.ndarray | None = Non
     at_bound = (np.isclose(z, lo) & np.isfinite(lo)) | (np.isclose(z, hi) & np.isfinite(hi))
     if status == "converged" and at_bound.any():
         reason += "; at a bound: " + ", ".join(n for n, b in zip(params.names, at_bound) if b)
-    return Fit(p, J, x, A, history, status, reason, method, k, at_bound)
+    return Fit(ev.p, ev.J, ev.x, ev.A, history, status, reason, method, k, at_bound, moved)

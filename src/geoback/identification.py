@@ -1,61 +1,253 @@
-"""`geoback run`: mesh, fit, assess and write every output of one case."""
+"""Identification of a case: prepare (mesh, simulation, misfit), fit, assess, return a frozen result.
+
+    analysis = prepare(load_case("cases/tunnel-paper.yaml"))
+    result = identify(analysis)            # or identify(loaded): prepares it first
+    result["E[clay]"].value, result["E[clay]"].std, result["E[clay]"].interval
+    print(result.report())
+
+The result holds numbers only (no model): figures and files read it, and what they need beyond
+it (an objective slice, the field) comes from ``explore`` (explicit, counted separately).
+"""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, field, replace
+from typing import Mapping
+
+import numpy as np
 
 from .case import LoadedCase
-from .estimate import Fit, Objective, fit
-from .problem import Problem
+from .errors import GeobackError
+from .estimate import Fit, Settings, fit
+from .misfit import Data, Misfit
+from .parameters import ParameterSet, resolve
+from .readings import measured_values
 from .reliability import Reliability, assess
+from .simulation import Prediction, Simulation, is_constant, make_simulation
 
 
-@dataclass
-class RunResult:
-    problem: Problem
+@dataclass(frozen=True)
+class Analysis:
+    """A case made ready to fit: its simulation (physics), the parameters and the named values
+    they are set into, its misfit (readings, C_x, priors; None when the case has no readings)
+    and the fit settings."""
+
+    loaded: LoadedCase
+    simulation: Simulation
+    parameters: ParameterSet
+    base_values: dict
+    misfit: Misfit | None
+    settings: Settings
+
+    @property
+    def case(self):
+        return self.loaded.case
+
+    def values_at(self, p) -> dict:
+        """Named values with the parameters set to p."""
+        values = dict(self.base_values)
+        values.update(zip(self.parameters.names, map(float, p)))
+        return values
+
+    @property
+    def values(self) -> dict:
+        """Named values the case starts from (parameters at their initial values)."""
+        return self.values_at(self.parameters.initial)
+
+    def predict(self, p, sensitivities: bool = False) -> Prediction:
+        """Computed readings at parameter values p and, if asked, A = dx/dp (eqns 29, 34-42)."""
+        return self.simulation.predict(self.values_at(p), self.parameters.names, sensitivities)
+
+    def with_readings(self, measured: np.ndarray, weighting: str | None = None) -> "Analysis":
+        """The same case (simulation and its factorisations shared) with other readings x*, in
+        survey order: study data, Monte Carlo replicates."""
+        if self.misfit is not None and weighting in (None, self.misfit.weighting):
+            return replace(self, misfit=self.misfit.with_measured(measured))
+        identified = {n for n in self.parameters.names if is_constant(n)}
+        data = Data.build(self.simulation.survey.blocks, np.asarray(measured, float), identified)
+        return replace(self, misfit=Misfit(self.simulation, data, self.parameters, self.base_values,
+                                           weighting or self.case.fit.weighting))
+
+
+def prepare(loaded: LoadedCase, mesh=None, backend: str | None = None, parameters=None,
+            values: Mapping | None = None, with_readings: bool = True, simulation: Simulation | None = None,
+            weighting: str | None = None) -> Analysis:
+    """Mesh, assemble and read a case: the simulation, and the misfit of its readings.
+
+    parameters: case Parameter models to identify instead of the case's; values: named values
+    that replace the case's (e.g. an extension switched on); with_readings=False: no misfit."""
+    case = loaded.case
+    simulation = simulation or make_simulation(loaded, mesh=mesh, backend=backend)
+    specs = case.parameters if parameters is None else parameters
+    own = parameters is None
+
+    def located(i, message):
+        if own:
+            return loaded.error(("parameters", i, "name"), message)
+        return GeobackError(message)
+
+    params, base = resolve(specs, simulation, values, error=located)
+    misfit = None
+    if with_readings:
+        measured = measured_values(loaded, simulation.survey.blocks)
+        if measured is not None:
+            identified = {n for n in params.names if is_constant(n)}
+            data = Data.build(simulation.survey.blocks, measured, identified)
+            misfit = Misfit(simulation, data, params, base, weighting or case.fit.weighting)
+    return Analysis(loaded, simulation, params, base, misfit, Settings.of(case.fit))
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One identified parameter: value, standard deviation and 95 % interval (eqn 55)."""
+
+    name: str
+    unit: str
+    initial: float
+    value: float
+    std: float
+    low: float
+    high: float
+    at_bound: bool
+
+    @property
+    def interval(self) -> tuple[float, float]:
+        return self.low, self.high
+
+    def __repr__(self) -> str:
+        bound = ", at a bound" if self.at_bound else ""
+        unit = f" {self.unit}" if self.unit not in ("-", "") else ""
+        return (f"{self.name} = {self.value:.6g} ± {self.std:.3g}{unit} "
+                f"(95 % [{self.low:.6g}, {self.high:.6g}]{bound})")
+
+
+@dataclass(frozen=True)
+class Identification:
+    """What `identify` found: the fit (estimate, history, status), its reliability (C_p,
+    correlations, SVD, information density, chi^2, AIC, BIC) and the data it was fitted to.
+
+    result["E[clay]"] -> Estimate; result.estimates -> all of them; result.report() -> text."""
+
+    case: object  # the Case model (pydantic, frozen)
+    case_hash: str
+    parameters: ParameterSet
     fit: Fit
     reliability: Reliability
-    objective: Objective
+    data: Data
+    weighting: str
+    counts: dict  # factorisations, solves, forward runs of the fit
     seconds: dict
+    dofs: int
+    elements: int
+    solver: str | None
+    standardised: np.ndarray  # L^-1 (x* - x) with the case's full C_x, whatever the weighting
+    notes: dict = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.case.name
+
+    @property
+    def estimates(self) -> list[Estimate]:
+        lo, hi = self.reliability.interval95()
+        p = self.parameters
+        return [Estimate(n, p.units[i], float(p.initial[i]), float(self.fit.p[i]), float(self.reliability.std[i]),
+                         float(lo[i]), float(hi[i]), bool(self.fit.at_bound[i])) for i, n in enumerate(p.names)]
+
+    def __getitem__(self, name: str) -> Estimate:
+        for e in self.estimates:
+            if e.name == name:
+                return e
+        raise KeyError(f"{name!r} is not an identified parameter ({', '.join(self.parameters.names)})")
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self.data.measured - self.fit.x
+
+    def report(self) -> str:
+        from .report import report_text
+
+        return report_text(self)
+
+    def __repr__(self) -> str:
+        rel = self.reliability
+        lines = [f"<Identification {self.name}: {self.fit.status}, {self.fit.iterations} iterations, "
+                 f"chi2/dof = {rel.reduced_chi2:.4g} (p = {rel.p_value:.3g})>"]
+        lines += [f"  {e!r}" for e in self.estimates]
+        return "\n".join(lines)
 
 
-def reliability_of(problem: Problem, result: Fit, objective: Objective) -> Reliability:
-    params = problem.params
-    residual = objective.measured - result.x
-    rp, _ = objective.prior_rows(result.p)
-    return assess(params.names, result.p, result.A, residual, objective.L, params.prior_precision(),
-                  J_prior=float(rp @ rp))
+def identify(case, method: str | None = None, progress=None, weighting: str | None = None,
+             p0: np.ndarray | None = None) -> Identification:
+    """Identify the case's parameters and assess the estimate (no files written).
 
-
-def identify(loaded: LoadedCase, method: str | None = None, problem: Problem | None = None,
-             progress=None, weighting: str | None = None) -> RunResult:
-    """Identify the case's parameters and assess the estimate (no files written)."""
+    case: a LoadedCase (prepared here) or an Analysis (its simulation and factorisations reused)."""
     t0 = time.perf_counter()
-    problem = problem or Problem(loaded)
+    analysis = case if isinstance(case, Analysis) else prepare(case)
     t1 = time.perf_counter()
-    if problem.params.n == 0:
-        from .errors import GeobackError
-
+    misfit = analysis.misfit
+    if misfit is None:
+        raise GeobackError("the case has instruments without readings: give 'readings' or 'readings_file' "
+                           "for every instrument to identify parameters")
+    if misfit.n == 0:
         raise GeobackError("the case lists no parameters to identify (add a 'parameters' section)")
-    objective = Objective(problem, weighting or loaded.case.fit.weighting)
-    result = fit(problem, method=method, progress=progress, weighting=weighting)
+    if weighting and weighting != misfit.weighting:
+        misfit = misfit.with_weighting(weighting)
+    sim = analysis.simulation
+    before = sim.counters.snapshot()
+    result = fit(misfit, analysis.settings, method=method, p0=p0, progress=progress)
+    counts = sim.counters.since(before)
     t2 = time.perf_counter()
-    rel = reliability_of(problem, result, objective)
-    result.counts = {"factorisations": problem.counters.factorisations, "solves": problem.counters.solves,
-                     "forward_runs": problem.counters.forward_runs}  # of the fit, before any output
-    seconds = dict(problem.timings, setup=t1 - t0, fit=t2 - t1, assess=time.perf_counter() - t2)
-    return RunResult(problem, result, rel, objective, seconds)
+    out = conclude(misfit, result, analysis.case, analysis.loaded.digest(), counts,
+                   dict(sim.timings, setup=t1 - t0, fit=t2 - t1))
+    out.seconds["assess"] = time.perf_counter() - t2
+    return out
 
 
-def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=None,
-             vtu: bool | None = None, plots: bool = False) -> RunResult:
-    """identify() and write all outputs to `out` (atomically, file by file)."""
-    from .report import write_run
+def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, seconds: dict) -> Identification:
+    """The frozen result of a fit: its reliability (eqns 43-55) and the data it was fitted to."""
+    rel = assess(misfit.evaluate(result.p, jacobian=True), misfit.parameters, misfit.logdet)
+    full = misfit if misfit.weighting == "full" else misfit.with_weighting("full")
+    standardised = full.whiten(misfit.data.measured - result.x)
+    sim = misfit.simulation
+    return Identification(
+        case, case_hash, misfit.parameters, result, rel, misfit.data, misfit.weighting,
+        {k: counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}, dict(seconds),
+        getattr(sim, "dofs", 0), len(getattr(sim.mesh, "triangles", ())), getattr(sim, "solver", None),
+        standardised)
 
-    t0 = time.perf_counter()
-    res = identify(loaded, method=method, progress=progress)
-    res.seconds["total_before_output"] = time.perf_counter() - t0
-    write_run(res, Path(out), vtu=loaded.case.output.vtu if vtu is None else vtu, plots=plots)
-    return res
 
+@dataclass(frozen=True)
+class Replicates:
+    """Estimates of many identifications of one case on other readings (Monte Carlo studies)."""
+
+    p: np.ndarray  # (N, n)
+    std: np.ndarray  # (N, n) linearised standard deviations at each estimate
+    covariance: np.ndarray  # (N, n, n)
+    J: np.ndarray  # (N,)
+    converged: np.ndarray  # (N,) bool
+    at_bound: np.ndarray  # (N, n) bool
+    names: list[str]
+
+
+def identify_replicates(analysis: Analysis, measured: np.ndarray, method: str | None = None,
+                        p0: np.ndarray | None = None) -> Replicates:
+    """Identify the case's parameters from each row of `measured` (N x m readings), reusing one
+    simulation (one factorisation when K = E k) and one misfit; for calibration studies."""
+    measured = np.atleast_2d(np.asarray(measured, float))
+    base = analysis.misfit
+    n = base.n
+    N = len(measured)
+    P, S, C, J = np.empty((N, n)), np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
+    ok, bound = np.zeros(N, bool), np.zeros((N, n), bool)
+    for i, x in enumerate(measured):
+        mis = base.with_measured(x)
+        f = fit(mis, analysis.settings, method=method, p0=p0)
+        Bw = mis.evaluate(f.p, jacobian=True).B
+        try:
+            cov = np.linalg.inv(Bw.T @ Bw)  # C_p = (A'^t A' + C_p0^-1)^-1, eqn 55
+        except np.linalg.LinAlgError:
+            cov = np.full((n, n), np.inf)
+        P[i], C[i], S[i], J[i], ok[i] = f.p, cov, np.sqrt(np.clip(np.diag(cov), 0, None)), f.J, f.status == "converged"
+        bound[i] = f.at_bound
+    return Replicates(P, S, C, J, ok, bound, list(base.parameters.names))

@@ -63,15 +63,13 @@ def combination_text(names: list[str], v: np.ndarray) -> str:
     return text[2:] if text.startswith("+ ") else text
 
 
-def assess(names: list[str], p: np.ndarray, A: np.ndarray, residual: np.ndarray, L: np.ndarray,
-           prior_precision: np.ndarray | None = None, J_prior: float = 0.0) -> Reliability:
-    """Everything eqns 43-55 say about the optimum p (A = dx/dp, residual = x* - x)."""
-    from scipy.linalg import solve_triangular
-
-    m, n = A.shape
-    Aw = solve_triangular(L, A, lower=True)
-    rw = solve_triangular(L, residual, lower=True)
-    prec = np.zeros(n) if prior_precision is None else np.asarray(prior_precision, float)
+def assess(ev, params, logdet: float) -> Reliability:
+    """Everything eqns 43-55 say about the optimum: `ev` is the misfit's Evaluation there (whitened
+    residual r' and sensitivity A', prior rows), `logdet` = ln det of the weighting covariance."""
+    names, p = params.names, ev.p
+    Aw, rw = ev.whitened_sensitivity, ev.whitened_residual
+    m, n = Aw.shape
+    prec = params.prior_precision()
     scale = np.where(np.abs(p) > 0, np.abs(p), 1.0)
     As = Aw * scale  # sensitivity to relative changes dp/p
     U, s, Vt = np.linalg.svd(As, full_matrices=False)
@@ -93,10 +91,9 @@ def assess(names: list[str], p: np.ndarray, A: np.ndarray, residual: np.ndarray,
     corr[~np.isfinite(corr)] = np.nan
     np.fill_diagonal(corr, 1.0)
     Q = As @ Cs @ As.T
-    chi2 = float(rw @ rw) + J_prior  # the priors are observations too (dof counts them)
+    chi2 = ev.J  # data and priors: the priors are observations too (dof counts them)
     dof = m - n + int(np.count_nonzero(prec))
     pval = chi2_sf(chi2, dof)
-    logdet = 2 * float(np.sum(np.log(np.abs(np.diag(L)))))
     m2logL = chi2 + logdet + m * np.log(2 * np.pi)
-    return Reliability(list(names), p, Cp, std, corr, s, Vt.T, cond, Q, np.diag(Q).copy(), rw, chi2, dof, pval,
-                       float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined)
+    return Reliability(list(names), p, Cp, std, corr, s, Vt.T, cond, Q, np.diag(Q).copy(), rw.copy(), chi2, dof,
+                       pval, float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined)

@@ -1,4 +1,8 @@
-"""Outputs of `geoback run` (DESIGN.md): CSV tables, summary.json, report.md, field.vtu."""
+"""Outputs of `geoback run`: CSV tables, summary.json, report.md and field.vtu.
+
+Readers only: everything comes from the frozen ``Identification`` and, for the field and the
+figures, from the ``Exploration``; nothing here runs the model.
+"""
 from __future__ import annotations
 
 import platform
@@ -14,18 +18,17 @@ def reading_label(lab) -> str:
     return f"{lab.instrument}:{lab.station}:{lab.component}"
 
 
-def summary(res) -> dict:
-    pr, f, rel = res.problem, res.fit, res.reliability
+def summary(res, exploration=None) -> dict:
+    f, rel, params = res.fit, res.reliability, res.parameters
     lo, hi = rel.interval95()
-    params = pr.params
-    return {
-        "case": pr.case.name,
-        "case_hash": pr.loaded.digest(),
+    out = {
+        "case": res.name,
+        "case_hash": res.case_hash,
         "geoback_version": __version__,
         "status": f.status,
         "stop_reason": f.reason,
         "method": f.method,
-        "weighting": res.objective.weighting,
+        "weighting": res.weighting,
         "iterations": f.iterations,
         "parameters": {n: {"unit": params.units[i], "initial": params.initial[i], "estimate": f.p[i],
                            "std": rel.std[i], "ci95": [lo[i], hi[i]], "at_bound": bool(f.at_bound[i])}
@@ -33,22 +36,25 @@ def summary(res) -> dict:
         "J": f.J, "chi2": rel.chi2, "dof": rel.dof, "reduced_chi2": rel.reduced_chi2, "p_value": rel.p_value,
         "minus_2_log_likelihood": rel.minus2logL, "aic": rel.aic, "bic": rel.bic,
         "condition_number": rel.condition, "undetermined": rel.undetermined,
-        "readings": pr.obs.m, "dofs": pr.fe.ndof, "elements": pr.fe.ne,
-        **f.counts, "solver": pr._factor[1].backend if pr._factor else None,
+        "readings": res.data.m, "dofs": res.dofs, "elements": res.elements,
+        **res.counts, "solver": res.solver,
         "timings_s": {k: round(v, 4) for k, v in res.seconds.items()},
         "platform": platform.platform(),
     }
+    if exploration is not None:  # the work of the field file and figures, apart from the identification's
+        out["exploration"] = {k: exploration.counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}
+        out["timings_s"]["exploration"] = round(exploration.seconds, 4)
+    return out
 
 
 def report_text(res) -> str:
     """A one-page report in the spirit of lmfit's fit_report."""
-    pr, f, rel = res.problem, res.fit, res.reliability
-    params = pr.params
-    lines = [f"# geoback fit report: {pr.case.name}", ""]
+    f, rel, params = res.fit, res.reliability, res.parameters
+    lines = [f"# geoback fit report: {res.name}", ""]
     lines += [f"- status: **{f.status}** ({f.reason})",
-              f"- method: {f.method}, {f.iterations} iterations, {f.counts['factorisations']} factorisation(s), "
-              f"{f.counts['solves']} solves",
-              f"- readings m = {pr.obs.m}, parameters n = {params.n}, dofs = {pr.fe.ndof}",
+              f"- method: {f.method}, {f.iterations} iterations, {res.counts['factorisations']} factorisation(s), "
+              f"{res.counts['solves']} solves",
+              f"- readings m = {res.data.m}, parameters n = {params.n}, dofs = {res.dofs}",
               f"- chi-square = {rel.chi2:.6g}, dof = {rel.dof}, reduced chi-square = {rel.reduced_chi2:.4g}, "
               f"p-value = {rel.p_value:.3g}",
               f"- AIC = {rel.aic:.6g}, BIC = {rel.bic:.6g}, condition number = {rel.condition:.3g}", "",
@@ -66,7 +72,7 @@ def report_text(res) -> str:
         lines += ["", "Correlations above 0.5: " + ", ".join(f"C({a}, {b}) = {c:+.3f}" for a, b, c in strong)]
     top = np.argsort(-rel.leverage)[:3]
     lines += ["", "Most informative readings (leverage = diag Q): " +
-              ", ".join(f"{reading_label(pr.obs.labels[i])} ({rel.leverage[i]:.2f})" for i in top)]
+              ", ".join(f"{reading_label(res.data.labels[i])} ({rel.leverage[i]:.2f})" for i in top)]
     warnings = []
     if f.status != "converged":
         warnings.append(f"the fit did not converge: {f.reason}")
@@ -83,9 +89,19 @@ def report_text(res) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_run(res, out: Path, vtu: bool = True, plots: bool = False) -> None:
-    pr, f, rel = res.problem, res.fit, res.reliability
-    params, names = pr.params, pr.params.names
+def write_field(field, path: Path) -> None:
+    """Displacement (point data) and cell data (stresses, ...) as VTU for ParaView."""
+    from .mesh import write_mesh
+
+    disp = field.displacement
+    write_mesh(field.mesh, path, point_data={"displacement": np.column_stack([disp, np.zeros(len(disp))])},
+               cell_data=field.cell_data)
+
+
+def write_run(res, out: Path, exploration=None, plots: bool = False) -> None:
+    """Every file of a run into `out`; the field (field.vtu) and figures if the exploration has them."""
+    f, rel, params = res.fit, res.reliability, res.parameters
+    names = params.names
     out = Path(out)
     lo, hi = rel.interval95()
     write_csv(out / "parameters.csv",
@@ -96,23 +112,22 @@ def write_run(res, out: Path, vtu: bool = True, plots: bool = False) -> None:
     write_matrix_csv(out / "correlation.csv", names, rel.correlation)
     write_csv(out / "eigen.csv", ["index", "singular_value"] + [f"v_{n}" for n in names],
               [[i + 1, rel.singular_values[i]] + list(rel.directions[:, i]) for i in range(len(rel.singular_values))])
-    labels = [reading_label(lab) for lab in pr.obs.labels]
+    labels = [reading_label(lab) for lab in res.data.labels]
     write_matrix_csv(out / "information_density.csv", labels, rel.information_density)
-    residual = res.objective.measured - f.x
+    measured = res.data.measured
+    residual = measured - f.x
     write_csv(out / "readings.csv",
               ["instrument", "kind", "station", "component", "x", "y", "measured", "computed", "residual",
                "whitened_residual", "leverage"],
-              [[lab.instrument, lab.kind, lab.station, lab.component, lab.x, lab.y, res.objective.measured[i],
-                f.x[i], residual[i], rel.whitened_residual[i], rel.leverage[i]] for i, lab in enumerate(pr.obs.labels)])
+              [[lab.instrument, lab.kind, lab.station, lab.component, lab.x, lab.y, measured[i],
+                f.x[i], residual[i], rel.whitened_residual[i], rel.leverage[i]] for i, lab in enumerate(res.data.labels)])
     write_csv(out / "iterations.csv", ["iteration", "mu", "J"] + names + ["accepted"],
               [[h.k, h.mu, h.J] + list(h.p) + [h.accepted] for h in f.history])
-    if vtu:
-        from .simulate import write_field
-
-        write_field(pr, pr.values_for(f.p), out / "field.vtu")
+    if exploration is not None and exploration.field is not None:
+        write_field(exploration.field, out / "field.vtu")
     if plots:
         from .plots import plot_run
 
-        plot_run(res, out)
+        plot_run(res, exploration, out)
     write_atomic(out / "report.md", report_text(res))
-    write_json(out / "summary.json", summary(res))
+    write_json(out / "summary.json", summary(res, exploration))

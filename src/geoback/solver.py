@@ -71,8 +71,8 @@ class Factorisation:
         self.n = upper.shape[0]
         self.backend = backend or default_backend(self.n)
         self.backsubstitutions = 0
-        self._Q = np.zeros((self.n, 0))  # orthonormal basis of the right-hand sides met so far
-        self._U = np.zeros((self.n, 0))  # K^-1 Q
+        self._raw = _SpanBasis(self.n, self.n)  # right-hand sides met so far and their solutions
+        self._coords: dict[int, _SpanBasis] = {}  # the same, keyed by the caller's coordinates
         if self.backend == "pardiso":
             import pypardiso
 
@@ -96,42 +96,68 @@ class Factorisation:
             out = np.column_stack([self._lu.solve(np.ascontiguousarray(rhs[:, j])) for j in range(rhs.shape[1])])
         return np.asarray(out).reshape(rhs.shape)
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
+    def solve(self, rhs: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
+        """K^-1 rhs for one or several right-hand sides (columns).
+
+        coords: the right-hand sides' coordinates in a small space of the caller's (rhs = M coords
+        for a fixed linear map M, e.g. loads from the stresses at the wall's quadrature points).
+        The span test is then made on the coordinates, whose rounding does not grow with the
+        number of unknowns; without them it is made on the right-hand sides themselves.
+        """
         rhs = np.asarray(rhs, dtype=float)
         B = rhs.reshape(self.n, -1)
+        if coords is None:
+            basis, keys = self._raw, B
+        else:
+            keys = np.asarray(coords, dtype=float).reshape(-1, B.shape[1])
+            basis = self._coords.setdefault(keys.shape[0], _SpanBasis(keys.shape[0], self.n))
         out = np.zeros_like(B)
         todo = []
         for j in range(B.shape[1]):
-            b = B[:, j]
-            nb = np.linalg.norm(b)
-            if nb == 0:
-                continue
-            c = self._Q.T @ b
-            if np.linalg.norm(b - self._Q @ c) <= SPAN_TOL * nb:
-                out[:, j] = self._U @ c
-            else:
+            hit = basis.lookup(keys[:, j])
+            if hit is None:
                 todo.append(j)
+            else:
+                out[:, j] = hit
         if todo:
             X = self._backsolve(B[:, todo])
             for k, j in enumerate(todo):
                 out[:, j] = X[:, k]
-                self._remember(B[:, j], X[:, k])
+                basis.remember(keys[:, j], X[:, k])
         return out.reshape(rhs.shape)
-
-    def _remember(self, b: np.ndarray, x: np.ndarray) -> None:
-        if self._Q.shape[1] >= MAX_BASIS:
-            return
-        c = self._Q.T @ b
-        q = b - self._Q @ c
-        c2 = self._Q.T @ q  # re-orthogonalise once (classical Gram-Schmidt twice is enough)
-        q -= self._Q @ c2
-        c += c2
-        nq = np.linalg.norm(q)
-        if nq <= 1e-10 * np.linalg.norm(b):
-            return
-        self._Q = np.column_stack([self._Q, q / nq])
-        self._U = np.column_stack([self._U, (x - self._U @ c) / nq])
 
     def release(self) -> None:
         if self.backend == "pardiso":
             self._solver.free_memory(everything=True)
+
+
+class _SpanBasis:
+    """Orthonormal basis Q of the keys met so far (columns) and the solutions U = K^-1 (M Q), so
+    that a key in their span is answered as U c without a back-substitution."""
+
+    def __init__(self, dim: int, n: int):
+        self.Q = np.zeros((dim, 0))
+        self.U = np.zeros((n, 0))
+
+    def lookup(self, key: np.ndarray) -> np.ndarray | None:
+        nk = np.linalg.norm(key)
+        if nk == 0:
+            return np.zeros(self.U.shape[0])
+        c = self.Q.T @ key
+        if np.linalg.norm(key - self.Q @ c) <= SPAN_TOL * nk:
+            return self.U @ c
+        return None
+
+    def remember(self, key: np.ndarray, x: np.ndarray) -> None:
+        if self.Q.shape[1] >= MAX_BASIS:
+            return
+        c = self.Q.T @ key
+        q = key - self.Q @ c
+        c2 = self.Q.T @ q  # re-orthogonalise once (classical Gram-Schmidt twice is enough)
+        q -= self.Q @ c2
+        c += c2
+        nq = np.linalg.norm(q)
+        if nq <= 1e-10 * np.linalg.norm(key):
+            return
+        self.Q = np.column_stack([self.Q, q / nq])
+        self.U = np.column_stack([self.U, (x - self.U @ c) / nq])

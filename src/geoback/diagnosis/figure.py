@@ -5,21 +5,24 @@ from __future__ import annotations
 from pathlib import Path
 
 
-def before_after_figure(d):
-    from ..estimate import Objective
-    from ..identification import RunResult
-    from ..plots import instruments_figure
+def before_after_figure(d, exploration=None):
+    """`exploration`: the model along the instruments at the final fit (``explore(d.final_misfit,
+    d.final, ("profiles",))``), or None for the readings only."""
+    import matplotlib
 
-    final = d.final_problem
-    res = RunResult(final, d.final_fit, d.final_reliability, Objective(final, final.case.fit.weighting), {})
+    from ..plots import instruments_figure
+    from ..plots.common import RC
+
     b, f = d.baseline_reliability, d.final_reliability
     after = " + ".join(s.hypothesis.title for s in d.accepted) or "nothing added"
     title = (f"{d.case}: baseline model (dashed red) and with {after} (blue): "
              f"χ²/dof {b.reduced_chi2:.3g} (p = {b.p_value:.2g}) → {f.reduced_chi2:.3g} (p = {f.p_value:.2g})")
-    return instruments_figure(res, before=d.baseline_fit.x, before_label="baseline model (before)", title=title)
+    with matplotlib.rc_context(RC):
+        return instruments_figure(d.final, exploration, before=d.baseline_fit.x, before_label="baseline model (before)",
+                                  title=title)
 
 
-def plot_before_after(d, out: Path) -> list[Path]:
+def plot_before_after(d, out: Path, exploration=None) -> list[Path]:
     from ..plots import save_figures
 
-    return save_figures({"diagnosis": before_after_figure(d)}, out)
+    return save_figures({"diagnosis": before_after_figure(d, exploration)}, out)

@@ -43,13 +43,13 @@ def _param(name: str, initial: float, lo: float, hi: float) -> Parameter:
     return Parameter(name=name, initial=initial, bounds=(lo, hi))
 
 
-def candidate_hypotheses(problem, p_hat: np.ndarray) -> list[Hypothesis]:
-    """Every extension that applies to this case, with null values taken at the baseline fit."""
-    case = problem.case
-    values = problem.values_for(p_hat)
+def candidate_hypotheses(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
+    """Every extension that applies to the misfit's model, with null values taken at its fit p_hat."""
+    case = misfit.simulation.loaded.case
+    values = misfit.values(p_hat)
     out: list[Hypothesis] = []
     tops = [layer.top for layer in case.ground.layers] + [case.geometry.depth]
-    baseline = set(problem.params.names)
+    baseline = set(misfit.parameters.names)
     R, zc = case.geometry.radius, case.geometry.axis_depth
     for i, layer in enumerate(case.ground.layers):
         name = layer.name
@@ -87,7 +87,7 @@ def candidate_hypotheses(problem, p_hat: np.ndarray) -> list[Hypothesis]:
             "stress-release", "stress-release", "partial stress release before support",
             "Only a fraction beta of the initial stress on the tunnel wall was released by the excavation.",
             [_param("beta", 1.0, 0.05, 1.5)]))
-    for block in problem.obs.blocks:
+    for block in misfit.data.blocks:
         names = [n for n in block.constant_names if n not in baseline]
         if not names:
             continue

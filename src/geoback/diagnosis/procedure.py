@@ -19,9 +19,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..case import Parameter
-from ..estimate import Fit, Objective, fit
+from ..estimate import Fit, Settings, fit
+from ..identification import Identification, conclude
+from ..misfit import Misfit
 from ..reliability import Reliability, chi2_sf
-from ..identification import reliability_of
 from .hypotheses import Hypothesis, candidate_hypotheses
 
 COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mimic
@@ -55,7 +56,7 @@ class Scored:
     p_lr: float = float("nan")
     aic: float = float("nan")
     bic: float = float("nan")
-    problem: object = None
+    misfit: Misfit | None = None  # the baseline extended with the hypothesis
 
 
 @dataclass
@@ -75,13 +76,26 @@ class Diagnosis:
     case: str
     alpha: float
     rounds: list[Round]
-    baseline_fit: Fit
-    baseline_reliability: Reliability
-    final_fit: Fit
-    final_reliability: Reliability
-    final_problem: object
-    baseline_problem: object
+    baseline: Identification  # the case's model fitted
+    final: Identification  # the model with every accepted extension, fitted
+    final_misfit: Misfit
     accepted: list[Scored] = field(default_factory=list)
+
+    @property
+    def baseline_fit(self) -> Fit:
+        return self.baseline.fit
+
+    @property
+    def baseline_reliability(self) -> Reliability:
+        return self.baseline.reliability
+
+    @property
+    def final_fit(self) -> Fit:
+        return self.final.fit
+
+    @property
+    def final_reliability(self) -> Reliability:
+        return self.final.reliability
 
     @property
     def adequate_before(self) -> bool:
@@ -93,23 +107,23 @@ class Diagnosis:
 
 
 # ---------------------------------------------------------------------------------------------
-def _fit_and_assess(problem, method, weighting, max_iterations=None):
-    objective = Objective(problem, weighting)
-    res = fit(problem, method=method, weighting=weighting, max_iterations=max_iterations)
-    return res, reliability_of(problem, res, objective), objective
+def _fit_and_assess(misfit: Misfit, settings: Settings, method: str, max_iterations=None):
+    res = fit(misfit, settings, method=method, max_iterations=max_iterations)
+    return res, conclude(misfit, res, None, "", {}, {}).reliability
 
 
-def locate(problem, res: Fit, rel: Reliability) -> list[Mismatch]:
+def locate(misfit: Misfit, res: Fit, rel: Reliability) -> list[Mismatch]:
     """Each instrument's share of J and its most significant stretch of misfit."""
     out = []
-    r = problem.obs.measured - res.x
+    data = misfit.data
+    r = data.measured - res.x
     J = rel.chi2  # data and priors
     offset = 0
-    for block in problem.obs.blocks:
+    for block in data.blocks:
         m = len(block.labels)
         rw = rel.whitened_residual[offset:offset + m]
         ri = r[offset:offset + m]
-        meas = problem.obs.measured[offset:offset + m]
+        meas = data.measured[offset:offset + m]
         share = float(rw @ rw) / J if J > 0 else 0.0
         if block.integration is not None:
             z = np.linalg.solve(block.integration, ri) / block.sigma  # standardised primary residuals
@@ -133,7 +147,7 @@ def locate(problem, res: Fit, rel: Reliability) -> list[Mismatch]:
                 f"({abs(stat):.1f} σ); {100 * share:.0f} % of J")
         out.append(Mismatch(block.name, block.kind, share, where, size, float(abs(stat)), text))
         offset += m
-    params = problem.params
+    params = misfit.parameters
     for i in np.flatnonzero(params.has_prior):  # a prior the readings contradict is a mismatch too
         z = (res.p[i] - params.prior_mean[i]) / params.prior_std[i]
         share = z * z / J if J > 0 else 0.0
@@ -170,17 +184,17 @@ def _stretch(block, i0: int, i1: int) -> str:
     return f"from ({start[0]:.3g}, {start[1]:.3g}) to ({end[0]:.3g}, {end[1]:.3g})"
 
 
-def score_hypotheses(problem, p_hat: np.ndarray, hypotheses: list[Hypothesis], weighting: str) -> list[Scored]:
-    """Score statistic of each hypothesis at the baseline optimum (no refit)."""
-    n = problem.params.n
-    base_specs = _specs(problem, p_hat)
+def score_hypotheses(misfit: Misfit, p_hat: np.ndarray, hypotheses: list[Hypothesis]) -> list[Scored]:
+    """Score statistic of each hypothesis at the baseline optimum (no refit). The statistic is the
+    squared norm of the whitened residual projected on the part of the extension's whitened
+    sensitivity the baseline cannot mimic; it does not depend on how parameters are scaled."""
+    n = misfit.n
     out = []
     for h in hypotheses:
-        ext = problem.derive(base_specs + h.parameters, h.extra_values)
-        obj = Objective(ext, weighting)
+        ext = misfit.extended(h.parameters, h.extra_values, start=p_hat)
         p0 = np.concatenate([p_hat, [q.initial for q in h.parameters]])
-        zq = ext.params.to_internal(p0) / obj.scale
-        _, _, _, r, B = obj.evaluate(zq, True)
+        ev = ext.evaluate(p0, jacobian=True)
+        r, B = ev.r, ev.B
         B1, B2 = B[:, :n], B[:, n:]
         Q1, _ = np.linalg.qr(B1)
         M2 = B2 - Q1 @ (Q1.T @ B2)
@@ -188,26 +202,13 @@ def score_hypotheses(problem, p_hat: np.ndarray, hypotheses: list[Hypothesis], w
         k = len(h.parameters)
         if np.all(rel_norm < COLLINEAR):
             coef = np.linalg.lstsq(B1, B2[:, 0], rcond=None)[0]
-            combo = ", ".join(nm for nm, c in zip(problem.params.names, coef) if abs(c) > 1e-3 * np.abs(coef).max())
-            out.append(Scored(h, 0.0, k, 1.0, collinear_with=combo, J0=float(r @ r), problem=ext))
+            combo = ", ".join(nm for nm, c in zip(misfit.parameters.names, coef) if abs(c) > 1e-3 * np.abs(coef).max())
+            out.append(Scored(h, 0.0, k, 1.0, collinear_with=combo, J0=float(r @ r), misfit=ext))
             continue
         coef = np.linalg.lstsq(M2, r, rcond=None)[0]
         S = float(np.sum((M2 @ coef) ** 2))
-        out.append(Scored(h, S, k, chi2_sf(S, k), J0=float(r @ r), problem=ext))
+        out.append(Scored(h, S, k, chi2_sf(S, k), J0=float(r @ r), misfit=ext))
     return out
-
-
-def _specs(problem, p: np.ndarray) -> list[Parameter]:
-    """The problem's parameters as case entries, started at p."""
-    specs = []
-    for i, name in enumerate(problem.params.names):
-        lo, hi = problem.params.lower[i], problem.params.upper[i]
-        pm, ps = problem.params.prior_mean[i], problem.params.prior_std[i]
-        specs.append(Parameter(
-            name=name, initial=float(np.clip(p[i], lo, hi)),
-            bounds=(float(lo), float(hi)) if np.isfinite(lo) and np.isfinite(hi) else None,
-            log=bool(problem.params.log[i]), prior={"mean": pm, "std": ps} if np.isfinite(pm) else None))
-    return specs
 
 
 def _best_of_groups(scored: list[Scored]) -> list[Scored]:
@@ -259,35 +260,38 @@ def _compare(s: Scored, J0: float, searched: int) -> None:
     s.bic = s.reliability.bic + searched * np.log(m)
 
 
-def _split_layer_problem(current, layer: str, z: float, p_hat: np.ndarray, E_below: float):
+def _split_layer_misfit(current: Misfit, case, loaded, layer: str, z: float, p_hat: np.ndarray,
+                        E_below: float) -> Misfit:
     """The current model with layer `layer` split at depth z into two meshed layers (conforming
     boundary) and the lower layer's modulus identified."""
     from ..case import LoadedCase
-    from ..problem import Problem
+    from ..simulation import make_simulation
 
-    case = current.case
     layers = list(case.ground.layers)
     i = [ly.name for ly in layers].index(layer)
     lower = layers[i].model_copy(update={"name": f"{layer}_below", "top": float(z), "E": float(E_below)})
     ground = case.ground.model_copy(update={"layers": layers[:i + 1] + [lower] + layers[i + 1:]})
-    split = LoadedCase(case.model_copy(update={"ground": ground}), current.loaded.path, current.loaded.marks)
-    specs = _specs(current, p_hat) + [Parameter(name=f"E[{layer}_below]", initial=float(E_below),
-                                                bounds=(float(E_below) / 50, float(E_below) * 50))]
-    extra = {k: v for k, v in current.values.items() if k not in current.ground.baseline()}
-    problem = Problem(split, parameters=specs, extra_values=extra, backend=current.backend)
-    problem.obs.measured = current.obs.measured
-    return problem
+    split = LoadedCase(case.model_copy(update={"ground": ground}), loaded.path, loaded.marks)
+    sim = make_simulation(split, backend=getattr(current.simulation, "backend", None),
+                          blocks=list(current.data.blocks))
+    spec = Parameter(name=f"E[{layer}_below]", initial=float(E_below), bounds=(float(E_below) / 50, float(E_below) * 50))
+    return current.extended([spec], simulation=sim, start=p_hat)
 
 
-def _refit_layer_boundary(current, cur_fit: Fit, group: list[Scored], method: str, weighting: str, say) -> Scored:
+def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], settings: Settings, method: str,
+                          say) -> Scored:
     """Profile the boundary depth: conforming refits at the best-scored depths, then bisect."""
     layer = group[0].hypothesis.key.split("[", 1)[1].split("@")[0]
     key = f"zsplit[{layer}]"
     depths = sorted(t.hypothesis.extra_values[key] for t in group)
     step = depths[1] - depths[0] if len(depths) > 1 else 1.0
-    lo_z = current.case.ground.layers[[ly.name for ly in current.case.ground.layers].index(layer)].top
-    hi_z = ([ly.top for ly in current.case.ground.layers if ly.top > lo_z] + [current.case.geometry.depth])[0]
+    sim = current.simulation
+    case = sim.loaded.case
+    names = [ly.name for ly in case.ground.layers]
+    lo_z = case.ground.layers[names.index(layer)].top
+    hi_z = ([ly.top for ly in case.ground.layers if ly.top > lo_z] + [case.geometry.depth])[0]
     by_depth = {t.hypothesis.extra_values[key]: t for t in group}
+    E0 = float(current.values(cur_fit.p)[f"E[{layer}]"])
     tried: dict[float, Scored] = {}
 
     def attempt(z: float, template: Scored) -> None:
@@ -295,9 +299,8 @@ def _refit_layer_boundary(current, cur_fit: Fit, group: list[Scored], method: st
         if z in tried or not lo_z < z < hi_z:
             return
         say(f"refitting with a layer boundary at {z:g} m in '{layer}'")
-        E0 = float(template.problem.values.get(f"Esplit[{layer}]", current.values[f"E[{layer}]"]))
         try:
-            problem = _split_layer_problem(current, layer, z, cur_fit.p, E0)
+            misfit = _split_layer_misfit(current, case, sim.loaded, layer, z, cur_fit.p, E0)
         except Exception as exc:  # a depth gmsh cannot mesh (too close to the tunnel): skip it
             say(f"  skipped depth {z:g} m: {exc}")
             return
@@ -306,8 +309,8 @@ def _refit_layer_boundary(current, cur_fit: Fit, group: list[Scored], method: st
                          f"Below {z:g} m depth the ground of '{layer}' has another modulus (an unmodelled layer "
                          f"boundary, meshed as a new layer '{layer}_below').",
                          [Parameter(name=f"E[{layer}_below]", initial=E0)], {key: z}, group=h.group)
-        t = Scored(hyp, template.score, template.dof, template.p_score, problem=problem)
-        t.refit, t.reliability, _ = _fit_and_assess(problem, method, weighting, REFIT_ITERATIONS)
+        t = Scored(hyp, template.score, template.dof, template.p_score, misfit=misfit)
+        t.refit, t.reliability = _fit_and_assess(misfit, settings, method, REFIT_ITERATIONS)
         _compare(t, cur_fit.J, 1)
         tried[z] = t
 
@@ -329,17 +332,24 @@ def _refit_layer_boundary(current, cur_fit: Fit, group: list[Scored], method: st
     return best
 
 
-def diagnose(loaded, problem=None, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
-             method: str = "lm", progress=None) -> Diagnosis:
-    """Find what the model is missing (see the module docstring)."""
-    from ..problem import Problem
+def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4, method: str = "lm",
+             progress=None) -> Diagnosis:
+    """Find what the model is missing (see the module docstring). case: a LoadedCase or an Analysis."""
+    from ..identification import Analysis, prepare
 
-    problem = problem or Problem(loaded)
-    weighting = loaded.case.fit.weighting
+    analysis = case if isinstance(case, Analysis) else prepare(case)
+    if analysis.misfit is None:
+        from ..errors import GeobackError
+
+        raise GeobackError("the case has instruments without readings: give 'readings' or 'readings_file' "
+                           "for every instrument to diagnose it")
+    settings = analysis.settings
     say = progress or (lambda msg: None)
     say("baseline fit")
-    base_fit, base_rel, _ = _fit_and_assess(problem, method, weighting)
-    current, cur_fit, cur_rel = problem, base_fit, base_rel
+    base = analysis.misfit
+    base_fit = fit(base, settings, method=method)
+    baseline = conclude(base, base_fit, analysis.case, analysis.loaded.digest(), {}, {})
+    current, cur_fit, cur_rel = base, base_fit, baseline.reliability
     rounds: list[Round] = []
     accepted: list[Scored] = []
     for k in range(max_rounds + 1):
@@ -349,7 +359,7 @@ def diagnose(loaded, problem=None, alpha: float = 0.05, max_rounds: int = 2, ref
             break
         hyps = candidate_hypotheses(current, cur_fit.p)
         say(f"scoring {len(hyps)} hypotheses")
-        ranking = _best_of_groups(scored := score_hypotheses(current, cur_fit.p, hyps, weighting))
+        ranking = _best_of_groups(scored := score_hypotheses(current, cur_fit.p, hyps))
         testable = [s for s in ranking if s.collinear_with is None]
         threshold = alpha / max(len(testable), 1)
         # adequate: the omnibus chi^2 test passes and no targeted alternative is significant
@@ -361,12 +371,12 @@ def diagnose(loaded, problem=None, alpha: float = 0.05, max_rounds: int = 2, ref
         for s in testable[:refit_top]:
             if s.hypothesis.group:
                 group = sorted((t for t in scored if t.hypothesis.group == s.hypothesis.group), key=lambda t: -t.score)
-                winner = _refit_layer_boundary(current, cur_fit, group, method, weighting, say)
+                winner = _refit_layer_boundary(current, cur_fit, group, settings, method, say)
                 winner.p_score = s.p_score
                 ranking[ranking.index(s)] = winner
                 continue
             say(f"refitting with {s.hypothesis.title}")
-            s.refit, s.reliability, _ = _fit_and_assess(s.problem, method, weighting, REFIT_ITERATIONS)
+            s.refit, s.reliability = _fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
             _compare(s, s.J0, 0)
         significant = [s for s in ranking if s.refit is not None and s.p_lr < threshold and _settled(s.refit)]
         rnd.accepted = _choose(significant)
@@ -374,6 +384,6 @@ def diagnose(loaded, problem=None, alpha: float = 0.05, max_rounds: int = 2, ref
             rnd.adequate = cur_rel.p_value >= alpha  # nothing in the library does better
             break
         accepted.append(rnd.accepted)
-        current, cur_fit, cur_rel = rnd.accepted.problem, rnd.accepted.refit, rnd.accepted.reliability
-    return Diagnosis(loaded.case.name, alpha, rounds, base_fit, base_rel, cur_fit, cur_rel, current, problem,
-                     accepted)
+        current, cur_fit, cur_rel = rnd.accepted.misfit, rnd.accepted.refit, rnd.accepted.reliability
+    final = conclude(current, cur_fit, current.simulation.loaded.case, analysis.loaded.digest(), {}, {})
+    return Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted)

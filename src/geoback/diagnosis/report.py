@@ -108,11 +108,13 @@ def diagnosis_json(d) -> dict:
     }
 
 
-def write_diagnosis(d, out: Path, plots: bool = True) -> None:
+def write_diagnosis(d, out: Path, plots: bool = True, exploration=None) -> None:
+    """diagnosis.md, diagnosis.json and (plots) diagnosis.png/.svg; `exploration` gives the figure
+    the model along each instrument at the final fit."""
     out = Path(out)
     write_atomic(out / "diagnosis.md", diagnosis_text(d))
     write_json(out / "diagnosis.json", diagnosis_json(d))
     if plots:
         from .figure import plot_before_after
 
-        plot_before_after(d, out)
+        plot_before_after(d, out, exploration)

@@ -1,0 +1,64 @@
+"""The extension table: physics the baseline model may lack, each a named change of the ground's
+fields (see ``geoback.ground.Fields``). `geoback diagnose` proposes them as hypotheses; a case may
+also identify them directly (``parameters: [{name: Egrad[clay], ...}]``) and `geoback simulate
+--set` switches them on for study data. The simulation reads this table; nothing in the core
+knows the individual rows.
+
+| name           | null value       | unit  | what it changes                                             |
+|----------------|------------------|-------|-------------------------------------------------------------|
+| Egrad[layer]   | 0                | kPa/m | E = E_top + Egrad (depth - top) inside the layer            |
+| Esplit[layer]  | E[layer]         | kPa   | E below depth zsplit[layer] inside the layer                |
+| zsplit[layer]  | the layer bottom | m     | depth of that unmodelled boundary (fixed by search, not fit)|
+| n[layer]       | 1                | -     | cross-anisotropy E_h / E_v                                  |
+| m[layer]       | 1                | -     | G_vh / (E_v / (2 (1 + nu)))                                 |
+| K0grad         | 0                | 1/m   | K0 = K0_axis + K0grad (depth - axis depth)                  |
+| beta           | 1                | -     | fraction of the initial stress released                     |
+
+Every ``apply`` is plain arithmetic on the fields, so complex values pass through and the
+sensitivities stay exact (complex step, eqns 34-40).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..ground import Extension
+
+
+def _gradient(f, value, ground, i, values):
+    sel = f.element_layer == i
+    f.E[sel] = f.E[sel] + value * (f.element_depth[sel] - ground.tops[i])
+
+
+def _split(f, value, ground, i, values):
+    z = values.get(f"zsplit[{ground.layers[i]}]")
+    if z is None:
+        return
+    below = (f.element_layer == i) & (f.element_depth > np.real(z))
+    f.E[below] = value
+
+
+def _ratio(attr):
+    def apply(f, value, ground, i, values):
+        getattr(f, attr)[f.element_layer == i] = value
+    return apply
+
+
+def _k0_gradient(f, value, ground, i, values):
+    f.k0 = f.k0 + value * (f.point_depth - ground.case.geometry.axis_depth)
+
+
+def _release(f, value, ground, i, values):
+    f.release = f.release * value
+
+
+EXTENSIONS: dict[str, Extension] = {e.base: e for e in (
+    Extension("Egrad", True, "kPa/m", 0.0, _gradient, "modulus increasing linearly with depth"),
+    Extension("Esplit", True, "kPa", lambda values, layer: values[f"E[{layer}]"], _split,
+              "another modulus below depth zsplit inside the layer"),
+    Extension("zsplit", True, "m", lambda values, layer: np.inf, None,
+              "depth of an unmodelled layer boundary", identifiable=False),
+    Extension("n", True, "-", 1.0, _ratio("n"), "cross-anisotropy E_h / E_v"),
+    Extension("m", True, "-", 1.0, _ratio("m"), "shear modulus G_vh relative to isotropy"),
+    Extension("K0grad", False, "1/m", 0.0, _k0_gradient, "K0 changing linearly with depth"),
+    Extension("beta", False, "-", 1.0, _release, "fraction of the initial stress released"),
+)}

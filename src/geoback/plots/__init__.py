@@ -1,0 +1,96 @@
+"""Figures of a run (`geoback run --plots`), after the paper's Figs. 2-5 and 8, one module each:
+
+- ``objective``: J over the two most correlated parameters with the Gauss-Newton and
+  Levenberg-Marquardt paths and the SVD directions V1, V2 at the minimum (Fig. 2);
+- ``convergence``: J and the parameters (relative to their final values) per iteration (Figs. 3-4);
+- ``information``: rows of Q for the readings of highest leverage, and Q itself (Figs. 5, 8);
+- ``instruments``: measured and computed readings along every instrument with +-2 sigma bands;
+- ``field``: the deformed mesh coloured by the displacement magnitude, with the instruments.
+
+Figures are built as :class:`matplotlib.figure.Figure` objects without pyplot (no global state,
+headless) from an ``Identification`` and an ``Exploration`` (``geoback.explore``): building them
+runs no model. :func:`build_figures` returns them, :func:`save_figures` writes them and
+:func:`plot_run` does both.
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import matplotlib
+
+from ..outputs import write_atomic
+from .common import DPI, RC
+from .convergence import convergence_figure
+from .field import field_figure
+from .information import information_density_figure
+from .instruments import instruments_figure
+from .objective import objective_contours_figure
+
+FIGURES = ("objective_contours", "convergence", "information_density", "instruments", "field")
+FORMATS = ("png", "svg")
+NEEDS = {"objective_contours": ("slice", "other"), "convergence": ("other",), "information_density": (),
+         "instruments": ("profiles",), "field": ("field", "profiles")}  # what each reads from the exploration
+_BUILD = {"objective_contours": objective_contours_figure, "convergence": convergence_figure,
+          "information_density": lambda res, exploration: information_density_figure(res),
+          "instruments": instruments_figure, "field": field_figure}
+
+
+def exploration_for(names=FIGURES) -> tuple[str, ...]:
+    """What ``explore`` must compute for these figures."""
+    return tuple(sorted({w for n in names for w in NEEDS[n]}))
+
+
+def build_figures(res, exploration, names: tuple[str, ...] = FIGURES) -> dict:
+    """Every figure of the run, by name (the exploration must hold what they need)."""
+    unknown = [n for n in names if n not in FIGURES]
+    if unknown:
+        raise ValueError(f"unknown figure(s): {', '.join(unknown)} (figures: {', '.join(FIGURES)})")
+    with matplotlib.rc_context(RC):
+        return {name: _BUILD[name](res, exploration) for name in names}
+
+
+def _compact_png(data: bytes) -> bytes:
+    """The PNG with an adaptive 256-colour palette (a third of the size, no visible change)."""
+    try:
+        from PIL import Image
+
+        im = Image.open(io.BytesIO(data)).convert("RGB")
+        q = im.quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+        buf = io.BytesIO()
+        q.save(buf, format="PNG", optimize=True)
+        return buf.getvalue() if buf.tell() < len(data) else data
+    except Exception:  # noqa: BLE001 - Pillow missing or too old: keep matplotlib's PNG
+        return data
+
+
+def save_figures(figs: dict, out: Path, formats: tuple[str, ...] = FORMATS, dpi: int = DPI,
+                 compact: bool = True) -> list[Path]:
+    """Write each figure as out/<name>.<format> (atomically); return the paths.
+
+    compact: store PNGs with a 256-colour palette (Pillow), about three times smaller."""
+    out = Path(out)
+    paths = []
+    with matplotlib.rc_context(RC):
+        for name, fig in figs.items():
+            for fmt in formats:
+                buf = io.BytesIO()
+                meta = {"Date": None} if fmt == "svg" else {"Software": None} if fmt == "png" else None
+                fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta)
+                data = buf.getvalue()
+                if fmt == "png" and compact:
+                    data = _compact_png(data)
+                path = out / f"{name}.{fmt}"
+                write_atomic(path, data)
+                paths.append(path)
+    return paths
+
+
+def plot_run(res, exploration, out: Path, formats: tuple[str, ...] = FORMATS) -> list[Path]:
+    """Build every figure of the run and write PNG and SVG files into `out`; return the paths."""
+    figs = build_figures(res, exploration)
+    try:
+        return save_figures(figs, out, formats)
+    finally:
+        for fig in figs.values():
+            fig.clear()

@@ -1,0 +1,31 @@
+"""`geoback run`: prepare, identify, explore what the outputs need, write every file of one case."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .case import LoadedCase
+from .identification import Identification, identify, prepare
+
+
+def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=None, vtu: bool | None = None,
+             plots: bool = False, say=None, prepared=None) -> Identification:
+    """identify() the case, explore what the field file and figures need, write all outputs to `out`.
+
+    progress(iteration) follows the fit; say(text) the steps after it; prepared(analysis) is
+    called once the case is meshed and read, before the fit."""
+    from .explore import explore
+    from .report import write_run
+
+    analysis = prepare(loaded)
+    if prepared is not None:
+        prepared(analysis)
+    res = identify(analysis, method=method, progress=progress)
+    vtu = loaded.case.output.vtu if vtu is None else vtu
+    what = ("field",) if vtu else ()
+    if plots:
+        from .plots import exploration_for
+
+        what = tuple(sorted(set(what) | set(exploration_for())))
+    exploration = explore(analysis.misfit, res, what, analysis.settings, progress=say) if what else None
+    write_run(res, Path(out), exploration, plots=plots)
+    return res

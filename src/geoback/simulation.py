@@ -1,0 +1,161 @@
+"""Physics behind one interface.
+
+A *simulation* is built from a case and a mesh and answers one question: the readings of its
+survey, and their sensitivities, at given named values,
+
+    x(v) = P u(v) - G c,      A = dx/dv   (eqns 29, 31-42),
+
+with its counters of factorisations and solves. Named values are the ground's (``E[clay]``,
+``K0``, ...), the extensions' (``Egrad[clay]``, ``beta``, ...) and the instruments' integration
+constants (``B[I1]``, ...). The one-step linear-elastic excavation (``elastic.py``) is the first
+implementation; statistics, diagnosis and reports see only this interface.
+"""
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .instruments import CONSTANT_STEMS, Survey
+
+
+@dataclass
+class Counters:
+    """What a simulation has spent: factorisations, back-substitutions, forward runs, seconds."""
+
+    factorisations: int = 0
+    solves: int = 0  # right-hand sides back-substituted
+    forward_runs: int = 0
+    seconds_factorising: float = 0.0
+    seconds_solving: float = 0.0
+    seconds_assembling: float = 0.0
+
+    def snapshot(self) -> dict:
+        return dict(vars(self))
+
+    def since(self, before: dict) -> dict:
+        """The counts spent since `before` (a snapshot)."""
+        return {k: v - before.get(k, 0) for k, v in vars(self).items()}
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Computed readings x and, if asked, A = dx/dv for the names asked (physical units)."""
+
+    x: np.ndarray
+    A: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Field:
+    """A solution on the mesh, for outputs: nodal displacement (N, 2) and cell data by name."""
+
+    mesh: object
+    displacement: np.ndarray
+    cell_data: dict = field(default_factory=dict)
+
+
+def is_constant(name: str) -> bool:
+    """Integration constants of linewise instruments: A[X1], B[I1], C[D1], D[D1]."""
+    return name.split("[")[0] in CONSTANT_STEMS and name.endswith("]")
+
+
+class Simulation(ABC):
+    """Readings of a survey and their sensitivities at named values (see the module docstring).
+
+    Subclasses provide the physics: ``quantities``, ``canonical``, ``null_value``, ``unit``,
+    ``_readings`` (x = P u and its sensitivity) and ``field``; this class adds the instruments'
+    integration constants (x -= G c, eqns 11, 15, 18), which no physics needs to know about.
+    """
+
+    loaded: object  # the LoadedCase it was built from
+    survey: Survey
+    counters: Counters
+    timings: dict
+    mesh: object
+
+    # ------------------------------------------------------------------ names
+    @abstractmethod
+    def quantities(self) -> dict[str, float]:
+        """Every named physical value of the case, at the case's values."""
+
+    @abstractmethod
+    def canonical(self, name: str) -> str | None:
+        """Full name of a physical quantity ('E' -> 'E[clay]' for one layer); None if unknown."""
+
+    @abstractmethod
+    def null_value(self, name: str, values: Mapping) -> float | None:
+        """Value of an extension quantity at which the model is the baseline; None if not one."""
+
+    @abstractmethod
+    def unit(self, name: str) -> str:
+        """Unit of a physical quantity."""
+
+    def known_names(self) -> list[str]:
+        """Examples of valid names, for messages."""
+        return sorted(self.quantities()) + list(self.survey.constant_names)
+
+    # ------------------------------------------------------------------ predictions
+    @abstractmethod
+    def _readings(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
+        """x = P u(values) and, for the physical names in `wrt`, its sensitivity columns."""
+
+    @abstractmethod
+    def field(self, values: Mapping) -> Field:
+        """Displacement and stress fields at `values` (outputs; not needed by a fit)."""
+
+    @abstractmethod
+    def displacements_at(self, values: Mapping, points: np.ndarray) -> np.ndarray:
+        """(ux, uy) at points (k, 2) of the ground; ValueError for a point outside it."""
+
+    def predict(self, values: Mapping, wrt: Sequence[str] = (), sensitivities: bool = False) -> Prediction:
+        """Readings at `values` (constants A-D default to 0); with `sensitivities`, A = dx/d(wrt)."""
+        physical = [n for n in wrt if not is_constant(n)] if sensitivities else []
+        pred = self._readings(values, physical)
+        x = pred.x
+        for name, v in values.items():
+            if is_constant(name) and v != 0:
+                x = x - self.survey.G[:, self.survey.constant_names.index(name)] * v
+        if not sensitivities:
+            return Prediction(x)
+        A = np.zeros((len(x), len(wrt)))
+        k = 0
+        for j, name in enumerate(wrt):
+            if is_constant(name):
+                A[:, j] = self.survey.constant_column(name)
+            else:
+                A[:, j] = pred.A[:, k]
+                k += 1
+        return Prediction(x, A)
+
+    def release(self) -> None:
+        """Free memory held by factorisations (the simulation stays usable)."""
+
+
+class Stopwatch:
+    """Adds elapsed seconds to a counter attribute: ``with Stopwatch(counters, 'seconds_solving'):``."""
+
+    def __init__(self, counters: Counters, attr: str):
+        self.counters, self.attr = counters, attr
+
+    def __enter__(self):
+        self.t0 = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        setattr(self.counters, self.attr, getattr(self.counters, self.attr) + time.perf_counter() - self.t0)
+        return False
+
+
+def make_simulation(loaded, mesh=None, backend: str | None = None, blocks=None, extensions=None) -> Simulation:
+    """The simulation a case asks for, with the extension table of `geoback diagnose` available
+    (``diagnosis/extensions.py``) unless another table is given. Today: the one-step
+    linear-elastic excavation."""
+    from .diagnosis.extensions import EXTENSIONS
+    from .elastic import ElasticSimulation
+
+    return ElasticSimulation(loaded, mesh=mesh, blocks=blocks, backend=backend,
+                             extensions=EXTENSIONS if extensions is None else extensions)
