@@ -12,6 +12,21 @@ if not os.environ.get("GEOBACK_CACHE"):
     os.environ["GEOBACK_CACHE"] = tempfile.mkdtemp(prefix="geoback-test-cache-")
 
 
+# The quick tier (`pytest -m quick`, under 90 s) for the edit-test loop: the numerical core
+# (covariances, solver, FE model, sensitivities, the seam, identification, instruments, reliability).
+# The default suite (`pytest`, what CI runs) adds the commands, figures, diagnosis, studies and
+# bad-input tests; `pytest -m slow` the long verification runs.
+QUICK_MODULES = {"test_covariance", "test_solver", "test_fem", "test_instruments", "test_identify",
+                 "test_sensitivity_extensions", "test_seam"}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        module = item.module.__name__.rsplit(".", 1)[-1] if item.module else ""
+        if module in QUICK_MODULES and not item.get_closest_marker("slow"):
+            item.add_marker(pytest.mark.quick)
+
+
 @pytest.fixture
 def paper_case_path() -> Path:
     return CASES / "tunnel-paper.yaml"

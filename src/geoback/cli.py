@@ -8,9 +8,13 @@ from functools import wraps
 from pathlib import Path
 from typing import Optional
 
-import typer
+# Dense linear algebra here is small (readings x parameters): BLAS threads cost more than they
+# give. Set before numpy loads; MKL's threads (PARDISO) are not affected.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from .errors import GeobackError
+import typer  # noqa: E402
+
+from .errors import GeobackError  # noqa: E402
 
 app = typer.Typer(add_completion=False, pretty_exceptions_enable=False, no_args_is_help=True, rich_markup_mode=None,
                   help="Maximum-likelihood back-analysis of tunnel and excavation instrumentation.")

@@ -192,8 +192,7 @@ class Ground:
     def state(self, values: Mapping) -> GroundState:
         """Element coefficients and released wall stresses (eqns 32, 39-40); complex-safe."""
         f = self.fields(values)
-        complex_n = np.iscomplexobj(f.n) or np.iscomplexobj(f.m)
-        if not complex_n and np.all(f.n == 1.0) and np.all(f.m == 1.0):
+        if np.all(f.n == 1.0) and np.all(f.m == 1.0):  # exactly isotropic (no perturbation either)
             d = plane_strain_isotropic(f.E, f.nu)
         else:
             d = plane_strain_cross_anisotropic(f.E, f.nu, f.n, f.m, f.nu)
