@@ -69,6 +69,11 @@ class LoadedCase:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def stage_names(case: Case) -> list[str]:
+    """Names of the construction stages readings can be taken at, in construction order."""
+    return ["excavation"]
+
+
 def load_case(path: str | Path) -> LoadedCase:
     """Read and validate a case file (YAML)."""
     data, marks = load_yaml_with_marks(path)

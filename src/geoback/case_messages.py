@@ -54,6 +54,8 @@ def _clean_loc(loc: tuple, data: Any) -> tuple:
             continue  # the discriminated union's tag
         if isinstance(part, str) and ("[" in part or part.startswith(("function-", "tagged-union"))):
             continue  # a validator's tag such as 'function-after[...]'
+        if part in ("in-order", "by-stage") and out and out[-1] == "readings":
+            continue  # the two shapes of readings (case_schema.Readings)
         out.append(part)
     return tuple(out)
 

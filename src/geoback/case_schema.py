@@ -9,7 +9,7 @@ import math
 import re
 from typing import Annotated, Any, Literal, Optional, Union
 
-from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field,
+from pydantic import (BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, Tag,
                       model_validator)
 
 from .yamlmarks import printable
@@ -134,10 +134,35 @@ class MeshSettings(Strict):
         0.25, description="element size grows by this fraction of the distance from the tunnel (and instruments)")
 
 
+NAME = r"^[A-Za-z0-9_\-.]+$"
+READING_UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "rad": 1.0, "mrad": 1e-3, "1/m": 1.0}
+
+
+def _readings_shape(value: Any) -> str:
+    return "by-stage" if isinstance(value, dict) else "in-order"
+
+
+StageName = Annotated[str, Field(pattern=NAME)]
+# a list in station order, or a mapping stage -> list; the tags name the two shapes (dropped from
+# error locations, which then follow the file: instruments[0].readings[3])
+Readings = Annotated[Union[Annotated[list[Num], Tag("in-order")],
+                           Annotated[dict[StageName, list[Num]], Tag("by-stage")]], Discriminator(_readings_shape)]
+
+
 class _Instrument(Strict):
-    name: str = Field(pattern=r"^[A-Za-z0-9_\-.]+$", description="unique instrument name")
-    readings: Optional[list[Num]] = Field(None, description="measured values in station order")
-    readings_file: Optional[str] = Field(None, description="CSV file with the readings (relative to the case file)")
+    name: str = Field(pattern=NAME, description="unique instrument name")
+    readings: Optional[Readings] = Field(
+        None, description="measured values in station order from the reference end (taken at the last construction "
+                          "stage), or a mapping stage: [values] for readings taken at several stages")
+    readings_file: Optional[str] = Field(
+        None, description="CSV or text file with the readings (relative to the case file): a header row with a value "
+                          "column (reading, value, measured or displacement), a position column (station, depth or "
+                          "distance from the reference end) unless the file lists one instrument in station order, "
+                          "and optionally instrument, component and stage columns; a unit in the header such as "
+                          "'reading [mm]'")
+    readings_unit: Optional[Literal["m", "mm", "cm", "rad", "mrad", "1/m"]] = Field(
+        None, description="unit of the readings (default SI: m for displacements and length changes, rad for slopes, "
+                          "1/m for curvatures)")
 
 
 class PointsInstrument(_Instrument):
@@ -175,8 +200,13 @@ class Inclinometer(_Linewise):
     toe_depth: Positive = Field(description="depth of the borehole's toe [m]")
     head_depth: NonNegative = Field(0.0, description="depth of the borehole's head [m]")
     reference: Literal["toe", "head"] = Field("toe", description="end the readings are integrated from")
+    readings_relative: Annotated[bool, BeforeValidator(_flag)] = Field(
+        True, description="true (field practice): the readings are movements relative to the reference end, as "
+                          "integrated from an end assumed fixed, and the model is compared as u(z) - u(reference end); "
+                          "false: absolute displacements (the reference end surveyed)")
     sigma: Positive = Field(description="standard deviation of one slope reading [rad]")
-    var_b: NonNegative = Field(0.0, description="variance of the integration constant B [m2]")
+    var_b: NonNegative = Field(0.0, description="variance of the integration constant B [m2]: the reference end's "
+                                                "movement beyond what the model computes for it")
 
 
 class SlidingMicrometer(_Linewise):
@@ -185,6 +215,9 @@ class SlidingMicrometer(_Linewise):
     kind: Literal["sliding_micrometer", "extensometer"]
     start: Point = Field(description="reference end [x, y] [m]")
     end: Point = Field(description="other end [x, y] [m]; displacement is positive from start to end")
+    readings_relative: Annotated[bool, BeforeValidator(_flag)] = Field(
+        False, description="true: the readings are movements relative to the reference end (start), compared with "
+                           "u - u(start); false (default): absolute displacements (the head surveyed)")
     sigma: Positive = Field(description="standard deviation of one length-change reading [m]")
     var_a: NonNegative = Field(0.0, description="variance of the integration constant A [m2]")
 

@@ -56,7 +56,13 @@ class ElasticSimulation(Simulation):
         t2 = time.perf_counter()
         self.ground = Ground(case, -self.fe.centroid[:, 1], self.fe.region, -self.fe.wall_points[:, 1],
                              extensions or {})
-        self.survey = build_survey(blocks if blocks is not None else case_blocks(loaded), self.fe)
+        blocks = blocks if blocks is not None else [b.at(self.stages[-1]) for b in case_blocks(loaded)]
+        late = [b for b in blocks if b.stage not in self.stages]
+        if late:
+            raise loaded.error(("instruments", late[0].index, "readings"),
+                               f"readings of '{late[0].name}' at stage '{late[0].stage}': the case has one "
+                               f"construction stage ('{self.stages[-1]}')")
+        self.survey = build_survey(blocks, self.fe)
         self.timings = {"mesh": t1 - t0, "assembly": t2 - t1, "observations": time.perf_counter() - t2}
         self.backend = backend
         self.counters = Counters()

@@ -53,8 +53,9 @@ class Profile:
     along: np.ndarray | None  # arc length [m] of the dense points (linewise only)
     line: np.ndarray | None  # (k, 2) dense points
     line_displacement: np.ndarray | None  # (k, 2)
-    measured_direction: np.ndarray | None  # displacement component the instrument reads
-    station_displacement: np.ndarray  # (npts, 2)
+    line_reading: np.ndarray | None  # (k,) what the instrument would read there (relative to its
+    # reference end for a relative instrument), without integration constants
+    station_displacement: np.ndarray  # (npts, 2) at the stations
 
 
 @dataclass(frozen=True)
@@ -161,21 +162,25 @@ def profiles(sim, values: dict) -> dict[str, Profile]:
     """The model along every instrument and at its stations (for the instrument and field figures)."""
     out = {}
     for block in sim.survey.blocks:
-        line = along = disp = direction = None
+        if block.name in out:  # the same instrument read at another stage
+            continue
+        line = along = disp = reading = None
+        stations = block.stations
         if block.integration is not None:
             s = np.cumsum(block.lengths)
-            pts = block.points
-            d = (pts[-1] - pts[0]) / np.linalg.norm(pts[-1] - pts[0]) if len(pts) > 1 else np.array([0.0, -1.0])
-            start = pts[0] - s[0] * d
+            d = (stations[-1] - stations[0]) / np.linalg.norm(stations[-1] - stations[0]) if len(stations) > 1 \
+                else np.array([0.0, -1.0])
+            start = stations[0] - s[0] * d
             along = np.linspace(0.0, s[-1], LINE_POINTS)
             line = start[None] + along[:, None] * d[None]
             direction = block.weights[0, 0]
             try:
-                disp = sim.displacements_at(values, line)
+                disp = sim.displacements_at(values, np.vstack([line, start]))
+                ref, disp = disp[-1], disp[:-1]
+                reading = (disp - ref) @ direction if block.relative else disp @ direction
             except ValueError:
-                line = along = disp = None
-        stations = sim.displacements_at(values, block.points)
-        out[block.name] = Profile(along, line, disp, direction, stations)
+                line = along = disp = reading = None
+        out[block.name] = Profile(along, line, disp, reading, sim.displacements_at(values, stations))
     return out
 
 

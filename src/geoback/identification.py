@@ -16,12 +16,12 @@ from typing import Mapping
 
 import numpy as np
 
-from .case import LoadedCase
+from .case import LoadedCase, stage_names
 from .errors import GeobackError
 from .estimate import Fit, Settings, fit
 from .misfit import Data, Misfit
 from .parameters import ParameterSet, resolve
-from .readings import measured_values
+from .readings import measured_values, survey_blocks
 from .reliability import Reliability, assess
 from .simulation import Prediction, Simulation, is_constant, make_simulation
 
@@ -77,7 +77,11 @@ def prepare(loaded: LoadedCase, mesh=None, backend: str | None = None, parameter
     parameters: case Parameter models to identify instead of the case's; values: named values
     that replace the case's (e.g. an extension switched on); with_readings=False: no misfit."""
     case = loaded.case
-    simulation = simulation or make_simulation(loaded, mesh=mesh, backend=backend)
+    if simulation is None:
+        blocks, measured = survey_blocks(loaded, stage_names(case), read=with_readings)
+        simulation = make_simulation(loaded, mesh=mesh, backend=backend, blocks=blocks)
+    else:
+        measured = measured_values(loaded, simulation.survey.blocks)
     specs = case.parameters if parameters is None else parameters
     own = parameters is None
 
@@ -89,7 +93,6 @@ def prepare(loaded: LoadedCase, mesh=None, backend: str | None = None, parameter
     params, base = resolve(specs, simulation, values, error=located)
     misfit = None
     if with_readings:
-        measured = measured_values(loaded, simulation.survey.blocks)
         if measured is not None:
             identified = {n for n in params.names if is_constant(n)}
             data = Data.build(simulation.survey.blocks, measured, identified)

@@ -9,7 +9,7 @@ each instrument measures; the measured values live in ``readings`` and the stati
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -32,6 +32,7 @@ class Reading:
     component: str
     x: float
     y: float
+    stage: str | None = None  # construction stage the reading was taken at
 
 
 @dataclass
@@ -52,10 +53,22 @@ class InstrumentBlock:
     constant_variances: dict = field(default_factory=dict)
     sigma: float = 1.0
     reading_type: str = "displacement"
+    relative: bool = False  # readings relative to the reference end: the last sampling point
+    stage: str | None = None
 
     @property
     def m(self) -> int:
         return len(self.labels)
+
+    @property
+    def stations(self) -> np.ndarray:
+        """Where the readings are: the stations of a linewise instrument (without the reference end
+        a relative instrument also samples), the points of the others."""
+        return self.points[:self.m] if self.lengths is not None else self.points
+
+    def at(self, stage: str) -> "InstrumentBlock":
+        """The same instrument read at construction stage `stage`."""
+        return replace(self, stage=stage, labels=[replace(lab, stage=stage) for lab in self.labels])
 
     def covariance_given(self, identified: set[str] | frozenset = frozenset()) -> np.ndarray:
         """C_x with the variance of every identified integration constant removed: once identified,
@@ -135,8 +148,12 @@ def build_block(ins, loaded: LoadedCase, index: int) -> InstrumentBlock:
     start, d, direction = _line(ins)
     pts = start[None] + np.cumsum(lengths)[:, None] * d[None]
     m = len(pts)
-    w = np.zeros((m, m, 2))
+    relative = bool(getattr(ins, "readings_relative", False))
+    w = np.zeros((m, m + relative, 2))
     w[np.arange(m), np.arange(m)] = direction
+    if relative:  # u(station) - u(reference end): movements relative to the end the readings start from
+        w[:, m] = -direction
+        pts = np.vstack([pts, start])
     comp = {"inclinometer": "ux", "sliding_micrometer": "along", "deflectometer": "normal"}[lkind]
     labels = [Reading(ins.name, kind, i + 1, comp, *pts[i]) for i in range(m)]
     names = cov.constant_names(lkind)
@@ -145,7 +162,8 @@ def build_block(ins, loaded: LoadedCase, index: int) -> InstrumentBlock:
                            cov.instrument_covariance(lkind, lengths, ins.sigma, variances),
                            cov.constant_matrix(lkind, lengths), [f"{n}[{ins.name}]" for n in names],
                            lengths=lengths, integration=cov.integration_matrix(lkind, lengths),
-                           constant_variances=variances, sigma=ins.sigma, reading_type=ins.reading_type)
+                           constant_variances=variances, sigma=ins.sigma, reading_type=ins.reading_type,
+                           relative=relative)
 
 
 def check_inside(case: Case, blocks: list[InstrumentBlock], loaded: LoadedCase) -> None:
@@ -167,7 +185,8 @@ def check_inside(case: Case, blocks: list[InstrumentBlock], loaded: LoadedCase) 
 
 
 def case_blocks(loaded: LoadedCase) -> list[InstrumentBlock]:
-    """Every instrument of the case (geometry, labels, covariance), checked to lie in the ground."""
+    """Every instrument of the case (geometry, labels, covariance), checked to lie in the ground;
+    stage-less (``readings.survey_blocks`` places them at the stages they were read)."""
     case = loaded.case
     if not case.instruments:
         raise loaded.error(("instruments",), "the case has no instruments: add at least one (see `geoback schema`)")

@@ -9,6 +9,7 @@ import numpy as np
 
 from .case import LoadedCase
 from .identification import Analysis, prepare
+from .errors import GeobackError
 from .outputs import write_csv, write_json
 from .readings import measured_values
 from .simulation import is_constant
@@ -39,7 +40,10 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
     values = dict(values if values is not None else analysis.values)
     x = sim.predict(values).x
     out = Path(out)
-    measured = measured_values(analysis.loaded, sim.survey.blocks)
+    try:
+        measured = measured_values(analysis.loaded, sim.survey.blocks)
+    except GeobackError:  # readings not at every stage: list the predictions alone
+        measured = None
     header = READING_HEADER + (["measured"] if measured is not None else [])
     rows = reading_rows(sim.survey.labels, x, measured)
     write_csv(out / "predicted.csv", header, rows)

@@ -94,6 +94,11 @@ class Simulation(ABC):
     def unit(self, name: str) -> str:
         """Unit of a physical quantity."""
 
+    @property
+    def stages(self) -> list[str]:
+        """Construction stages the simulation computes, in order (readings are taken at them)."""
+        return ["excavation"]
+
     def known_names(self) -> list[str]:
         """Examples of valid names, for messages."""
         return sorted(self.quantities()) + list(self.survey.constant_names)

@@ -173,7 +173,7 @@ def _strongest_run(z: np.ndarray) -> tuple[int, int, float]:
 
 def _stretch(block, i0: int, i1: int) -> str:
     """Where intervals i0..i1 of a linewise instrument lie (interval k ends at station k)."""
-    pts = block.points
+    pts = block.stations
     d = (pts[1] - pts[0]) / np.linalg.norm(pts[1] - pts[0]) if len(pts) > 1 else np.array([0.0, 1.0])
     reference = pts[0] - d * block.lengths[0]
     start = pts[i0 - 1] if i0 > 0 else reference

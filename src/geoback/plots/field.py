@@ -29,7 +29,7 @@ def field_figure(res, exploration) -> Figure:
     inst = []  # (block, displaced stations, displaced line or None)
     for block in res.data.blocks:
         prof = exploration.profiles[block.name]
-        stations = block.points + factor * prof.station_displacement
+        stations = block.stations + factor * prof.station_displacement
         if block.kind == "convergence":  # a straight chord between its two (displaced) ends
             line_moved = stations
         elif prof.line is not None:

@@ -42,14 +42,17 @@ def instruments_figure(res, exploration=None, before: np.ndarray | None = None, 
             what = {"inclinometer": "horizontal displacement u_x", "deflectometer": "displacement normal to the line"
                     }.get(block.kind, "displacement along the line")
             what += f" ({direction_words(w0)})"
+            if block.relative:
+                what = what.replace(" (", " relative to the reference end\n(", 1)
         if linewise:
-            d = block.points[-1] - block.points[0] if len(block.points) > 1 else np.array([0.0, -1.0])
+            st = block.stations
+            d = st[-1] - st[0] if len(st) > 1 else np.array([0.0, -1.0])
             vertical = abs(d[1]) >= abs(d[0])
-            coord = -block.points[:, 1] if vertical else block.points[:, 0]
+            coord = -st[:, 1] if vertical else st[:, 0]
             dense = None
             prof = profiles.get(block.name)
             if prof is not None and prof.line is not None and not any(n.endswith(f"[{block.name}]") for n in identified):
-                dense = (prof.line_displacement @ prof.measured_direction * mm,
+                dense = (prof.line_reading * mm,
                          -prof.line[:, 1] if vertical else prof.line[:, 0])
             # draw (value, coordinate) pairs: depth downwards for vertical lines, x across otherwise
             pair = (lambda v, c: (v, c)) if vertical else (lambda v, c: (c, v))
