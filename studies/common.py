@@ -146,7 +146,7 @@ def identify_p(analysis, weighting: str, p0=None):
     """Fit and assess on the analysis' readings; returns (Fit, Reliability)."""
     from geoback.identification import identify
 
-    res = identify(analysis, weighting=weighting, p0=p0)
+    res = identify(analysis, weighting=weighting, p0=p0, require_dof=False)
     return res.fit, res.reliability
 
 

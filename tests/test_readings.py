@@ -187,7 +187,9 @@ def test_readings_out_reads_back_identically(tmp_path):
     run = subprocess.run([sys.executable, "-m", "geoback.cli", "simulate", str(case), "--noise", "--seed", "3",
                           "--readings-out", str(out)], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
-    written = np.array([float(line.split(",")[-1]) for line in out.read_text().splitlines()[1:]])
+    lines = out.read_text().splitlines()
+    assert lines[0].startswith("# geoback simulate paper.yaml: the case's values; a mesh 2 times finer")
+    written = np.array([float(line.split(",")[-1]) for line in lines[2:]])
     data = yaml.safe_load(PAPER.read_text())
     for ins in data["instruments"]:
         ins.pop("readings")

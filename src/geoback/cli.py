@@ -107,36 +107,52 @@ def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
 def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
              vtu: bool = typer.Option(True, help="write the displacement/stress field as field.vtu"),
-             set_: list[str] = typer.Option([], "--set", help="switch on physics: NAME=VALUE, e.g. Egrad[clay]=400, "
-                                            "n[clay]=1.5, K0grad=0.05, beta=0.7, B[I1]=0.004, zsplit[clay]=15 with "
-                                            "Esplit[clay]=25000 (repeatable)"),
-             refine: float = typer.Option(1.0, help="mesh this many times finer than the case says"),
+             set_: list[str] = typer.Option([], "--set", help="NAME=VALUE with the case's names and units (repeatable): "
+                                            "E[clay]=12 MPa, Egrad[clay]=400, n[clay]=1.5, K0grad=0.05, beta=0.7, "
+                                            "B[I1]=4 mm, zsplit[clay]=15 with Esplit[clay]=25 MPa"),
+             refine: Optional[float] = typer.Option(None, help="mesh this many times finer than the case says "
+                                                    "(default 2 for study data, 1 for a forward run)"),
              noise: bool = typer.Option(False, "--noise", help="add noise drawn from each instrument's C_x"),
              seed: int = typer.Option(0, help="seed of the noise"),
-             readings_out: Optional[Path] = typer.Option(None, help="write the readings as a CSV usable as readings_file")):
-    """Forward run: predicted readings and the field; or study data (--set, --refine, --noise, --readings-out)."""
+             readings_out: Optional[Path] = typer.Option(None, help="write study data: readings as a CSV usable as "
+                                                         "readings_file (a finer mesh than the case's by default)")):
+    """Forward run: predicted readings and the field; or study data (--readings-out, --noise)."""
     from .identification import prepare
     from .simulate import simulate as run_simulation, synthetic_readings, write_readings_csv
 
     loaded = _load(case)
-    values = {}
+    assignments = {}
     for item in set_:
-        name, _, value = item.partition("=")
-        try:
-            values[name.strip()] = float(value)
-        except ValueError:
-            raise GeobackError(f"--set expects NAME=NUMBER, found '{item}'") from None
-    if readings_out is not None or noise or refine != 1.0:
-        readings = synthetic_readings(loaded, refine, values, noise_seed=seed if noise else None)
+        name, eq, value = item.partition("=")
+        if not eq or not name.strip() or not value.strip():
+            raise GeobackError(f"--set expects NAME=VALUE (e.g. --set \"E[clay]=12 MPa\"), found '{item}'")
+        assignments[name.strip()] = value.strip()
+    if readings_out is not None or noise:
+        factor = 2.0 if refine is None else refine
+        if factor < 1:
+            raise GeobackError(f"--refine must be at least 1 (a mesh finer than the case's), found {factor:g}")
+        readings = synthetic_readings(loaded, factor, assignments, noise_seed=seed if noise else None)
         target = readings_out or _out_dir(loaded, out) / "readings.csv"
-        write_readings_csv(loaded, readings, target)
-        typer.echo(f"{sum(len(v) for v in readings.values())} readings (mesh x{refine:g} finer"
+        used = ", ".join(f"{k} = {v}" for k, v in assignments.items()) or "the case's values"
+        mesh = "the case's mesh (inverse crime: fitting these readings on it proves little)" if factor == 1 else \
+            f"a mesh {factor:g} times finer than the case's"
+        notes = [f"geoback simulate {case.name}: {used}; {mesh}" + (f"; noise from each C_x, seed {seed}" if noise
+                                                                    else "; no noise")]
+        write_readings_csv(loaded, readings, target, notes)
+        typer.echo(f"{sum(len(v) for v in readings.values())} readings ({used}; {mesh}"
                    f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
         return
-    analysis = prepare(loaded, parameters=[], values=values, with_readings=False)
+    analysis = prepare(loaded, parameters=[], with_readings=False)
+    from .parameters import resolve_values
+
+    values = {**analysis.values, **resolve_values(analysis.simulation, assignments)}
+    if refine not in (None, 1.0):
+        raise GeobackError("--refine applies to study data (--readings-out or --noise)")
     folder = _out_dir(loaded, out)
-    res = run_simulation(analysis, folder, vtu=vtu and loaded.case.output.vtu)
-    typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs -> {folder}/predicted.csv")
+    res = run_simulation(analysis, folder, values=values, vtu=vtu and loaded.case.output.vtu)
+    used = ", ".join(f"{k} = {v}" for k, v in assignments.items())
+    typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs"
+               f"{' with ' + used if used else ''} -> {folder}/predicted.csv")
 
 
 @app.command()
@@ -164,12 +180,20 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
     typer.echo(f"-> {folder}/diagnosis.md, diagnosis.json", err=True)
 
 
-@app.command()
+EXIT_CODES = """Exit codes: 0 converged (warnings, if any, are printed); 1 the fit did not converge or did not
+move from the initial values; 2 the input was refused (the message names file, line and field);
+3 with --strict: converged, but with warnings; 130 interrupted."""
+
+
+@app.command(epilog=EXIT_CODES)
 @friendly
 def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
         method: Optional[str] = typer.Option(None, help="lm, lm-scaled or gn (default: the case's fit.method)"),
         plots: bool = typer.Option(False, "--plots", help="also write figures (PNG and SVG)"),
+        profile: bool = typer.Option(False, "--profile", help="profile-likelihood intervals for every parameter "
+                                     "(by default only where the linearised interval is unreliable)"),
+        strict: bool = typer.Option(False, "--strict", help="exit 3 if the result carries any warning (for CI)"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="print only the final line"),
         as_json: bool = typer.Option(False, "--json", help="print summary.json to stdout")):
     """Identify the case's parameters by maximum likelihood and write all results."""
@@ -193,17 +217,21 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         names[:] = analysis.parameters.names
 
     res = run_case(loaded, folder, method=method, progress=progress, plots=plots, say=_say if talk else None,
-                   prepared=named)
+                   prepared=named, profile="all" if profile else "auto")
     if as_json:
         typer.echo(json.dumps(json.loads((folder / "summary.json").read_text())))
     elif not quiet:
         typer.echo(report_text(res))
     s = summary(res)
     estimates = ", ".join(f"{n} = {v['estimate']:.6g} +/- {v['std']:.3g}" for n, v in s["parameters"].items())
-    typer.echo(f"{s['status']}: {estimates} ({s['iterations']} iterations, {s['factorisations']} "
-               f"factorisation(s)) -> {folder}", err=as_json)
-    if res.fit.status != "converged":
+    warned = f"; {len(res.caveats)} warning(s): {', '.join(sorted({c.code for c in res.caveats}))}" \
+        if res.caveats else ""
+    typer.echo(f"{res.status}: {estimates} ({s['iterations']} iterations, {s['factorisations']} "
+               f"factorisation(s){warned}) -> {folder}", err=as_json)
+    if res.fit.status != "converged" or not res.fit.moved:
         raise typer.Exit(1)
+    if strict and res.caveats:
+        raise typer.Exit(3)
 
 
 @app.command()

@@ -82,6 +82,9 @@ class ElasticSimulation(Simulation):
     def unit(self, name: str) -> str:
         return self.ground.unit(name)
 
+    def limits(self, name: str, values: Mapping):
+        return self.ground.limits(name, values)
+
     @property
     def dofs(self) -> int:
         return self.fe.ndof

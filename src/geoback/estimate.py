@@ -58,7 +58,7 @@ class Fit:
     method: str
     iterations: int
     at_bound: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-    moved: bool = True  # did any step get accepted
+    moved: bool = True  # False: stuck at the initial values (no step decreased J, yet J was not at a minimum)
 
 
 class _Coordinates:
@@ -130,6 +130,7 @@ def fit(misfit: Misfit, settings: Settings = Settings(), method: str | None = No
         if predicted <= settings.objective_tol * J:
             k -= 1
             status, reason = "converged", f"predicted decrease of J ({predicted:.1e}) below tolerance"
+            moved = True  # at the minimum already: nowhere to move
             break
         accepted = False
         for _trial in range(MAX_TRIALS):
@@ -148,7 +149,10 @@ def fit(misfit: Misfit, settings: Settings = Settings(), method: str | None = No
                 mu *= 10
                 step = _solve_step(N, g, damping(N))
         if not accepted:
-            status, reason = "converged", "no step decreases J any more (minimum to working precision)"
+            if moved:
+                status, reason = "converged", "no step decreases J any more (minimum to working precision)"
+            else:
+                status, reason = "not converged", "no step from the initial values decreases J: stopped without moving"
             break
         moved = True
         dz = z_new - z

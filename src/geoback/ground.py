@@ -19,6 +19,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from .case import Case
+from .limits import EARTH_PRESSURE, MODULUS, POISSON, Limits
 
 COMPLEX_STEP = 1e-30
 
@@ -83,6 +84,7 @@ class Extension:
     apply: Callable[["Fields", object, "Ground", int | None, Mapping], None] | None = None
     description: str = ""
     identifiable: bool = True
+    limits: Limits | Callable[[Mapping, "Ground", int | None], Limits] = Limits(-1e9, 1e9, (-1e9, 1e9))
 
 
 @dataclass
@@ -156,6 +158,17 @@ class Ground:
         if base in self.extensions:
             return self.extensions[base].unit
         return {"E": "kPa", "nu": "-", "K0": "-"}.get(base, "-")
+
+    def limits(self, name: str, values: Mapping) -> Limits:
+        """Allowed and usual range of a quantity (given the other values, e.g. a layer's nu)."""
+        base, _, rest = name.partition("[")
+        if base in ("E", "nu", "K0"):
+            return {"E": MODULUS, "nu": POISSON, "K0": EARTH_PRESSURE}[base]
+        ext = self.extensions[base]
+        if callable(ext.limits):
+            layer = self.layers.index(rest[:-1]) if ext.per_layer else None
+            return ext.limits(values, self, layer)
+        return ext.limits
 
     # ------------------------------------------------------------------ the map
     def layer_k0(self, values: Mapping, i: int):

@@ -20,8 +20,9 @@ from .case import LoadedCase, stage_names
 from .errors import GeobackError
 from .estimate import Fit, Settings, fit
 from .misfit import Data, Misfit
-from .parameters import ParameterSet, resolve
+from .parameters import ParameterSet, parameter_limits, resolve
 from .readings import measured_values, survey_blocks
+from .caveats import fit_caveats, status_words
 from .reliability import Reliability, assess
 from .simulation import Prediction, Simulation, is_constant, make_simulation
 
@@ -38,6 +39,7 @@ class Analysis:
     base_values: dict
     misfit: Misfit | None
     settings: Settings
+    notices: tuple = ()  # unusual input values (geoback.caveats), carried into the results
 
     @property
     def case(self):
@@ -85,19 +87,38 @@ def prepare(loaded: LoadedCase, mesh=None, backend: str | None = None, parameter
     specs = case.parameters if parameters is None else parameters
     own = parameters is None
 
-    def located(i, message):
+    def located(i, message, field="name"):
         if own:
-            return loaded.error(("parameters", i, "name"), message)
+            return loaded.error(("parameters", i, field), message)
         return GeobackError(message)
 
-    params, base = resolve(specs, simulation, values, error=located)
+    params, base, notices = resolve(specs, simulation, values, error=located)
+    notices += input_notices(case, simulation)
     misfit = None
     if with_readings:
         if measured is not None:
             identified = {n for n in params.names if is_constant(n)}
             data = Data.build(simulation.survey.blocks, measured, identified)
             misfit = Misfit(simulation, data, params, base, weighting or case.fit.weighting)
-    return Analysis(loaded, simulation, params, base, misfit, Settings.of(case.fit))
+    return Analysis(loaded, simulation, params, base, misfit, Settings.of(case.fit), tuple(notices))
+
+
+def input_notices(case, simulation: Simulation) -> list:
+    """Case values outside the usual range for ground (a modulus written in Pa, say)."""
+    from .caveats import Caveat
+
+    out = []
+    values = simulation.quantities()
+    for name, v in values.items():
+        lim = simulation.limits(name, values)
+        if not lim.plausible[0] <= v <= lim.plausible[1]:
+            unit = simulation.unit(name)
+            hint = " (was it written in Pa? the case's stresses are in kPa: write e.g. '60 MPa')" \
+                if unit == "kPa" and v > lim.plausible[1] else ""
+            out.append(Caveat("implausible-input", f"{name} = {v:g} {unit if unit != '-' else ''} in the case is "
+                                                   f"outside the usual range for ground ({lim.plausible[0]:g} to "
+                                                   f"{lim.plausible[1]:g}){hint}".replace("  ", " "), name))
+    return out
 
 
 @dataclass(frozen=True)
@@ -144,7 +165,23 @@ class Identification:
     elements: int
     solver: str | None
     standardised: np.ndarray  # L^-1 (x* - x) with the case's full C_x, whatever the weighting
-    notes: dict = field(default_factory=dict)
+    profiled: dict = field(default_factory=dict)  # name -> (low, high, low open, high open): profile-
+    # likelihood 95 % intervals; an open end is a limit (bound or allowed range) the readings do not move away from
+    caveats: tuple = ()  # what not to trust, in words and codes (geoback.caveats)
+
+    @property
+    def status(self) -> str:
+        """'converged', 'converged; model inadequate (p = ...)', 'not converged' or 'stopped without moving'."""
+        return status_words(self.fit, self.reliability)
+
+    def intervals95(self) -> tuple[np.ndarray, np.ndarray]:
+        """The 95 % interval of each parameter: profile likelihood where it was computed, else linearised."""
+        lo, hi = self.reliability.interval95()
+        lo, hi = lo.copy(), hi.copy()
+        for name, (a, b, _, _) in self.profiled.items():
+            i = self.parameters.index(name)
+            lo[i], hi[i] = a, b
+        return lo, hi
 
     @property
     def name(self) -> str:
@@ -152,7 +189,7 @@ class Identification:
 
     @property
     def estimates(self) -> list[Estimate]:
-        lo, hi = self.reliability.interval95()
+        lo, hi = self.intervals95()
         p = self.parameters
         return [Estimate(n, p.units[i], float(p.initial[i]), float(self.fit.p[i]), float(self.reliability.std[i]),
                          float(lo[i]), float(hi[i]), bool(self.fit.at_bound[i])) for i, n in enumerate(p.names)]
@@ -181,10 +218,12 @@ class Identification:
 
 
 def identify(case, method: str | None = None, progress=None, weighting: str | None = None,
-             p0: np.ndarray | None = None) -> Identification:
+             p0: np.ndarray | None = None, profile: str = "auto", require_dof: bool = True) -> Identification:
     """Identify the case's parameters and assess the estimate (no files written).
 
-    case: a LoadedCase (prepared here) or an Analysis (its simulation and factorisations reused)."""
+    case: a LoadedCase (prepared here) or an Analysis (its simulation and factorisations reused);
+    profile: 'auto' (profile-likelihood intervals where the linearised ones are unreliable), 'all'
+    or 'none'; require_dof: refuse a case with no more readings (and priors) than parameters."""
     t0 = time.perf_counter()
     analysis = case if isinstance(case, Analysis) else prepare(case)
     t1 = time.perf_counter()
@@ -194,6 +233,13 @@ def identify(case, method: str | None = None, progress=None, weighting: str | No
                            "for every instrument to identify parameters")
     if misfit.n == 0:
         raise GeobackError("the case lists no parameters to identify (add a 'parameters' section)")
+    priors = int(np.count_nonzero(misfit.parameters.has_prior))
+    if require_dof and misfit.m + priors <= misfit.n:
+        raise analysis.loaded.error(("parameters",),
+            f"expected more readings than parameters, found {misfit.m} reading(s)"
+            + (f" and {priors} prior(s)" if priors else "") + f" for {misfit.n} parameters "
+            f"({', '.join(misfit.parameters.names)}): the fit would have {misfit.m + priors - misfit.n} degrees of "
+            "freedom and nothing could test it; add readings or priors, or identify fewer parameters")
     if weighting and weighting != misfit.weighting:
         misfit = misfit.with_weighting(weighting)
     sim = analysis.simulation
@@ -202,22 +248,69 @@ def identify(case, method: str | None = None, progress=None, weighting: str | No
     counts = sim.counters.since(before)
     t2 = time.perf_counter()
     out = conclude(misfit, result, analysis.case, analysis.loaded.digest(), counts,
-                   dict(sim.timings, setup=t1 - t0, fit=t2 - t1))
+                   dict(sim.timings, setup=t1 - t0, fit=t2 - t1), analysis.settings, profile, analysis.notices)
     out.seconds["assess"] = time.perf_counter() - t2
     return out
 
 
-def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, seconds: dict) -> Identification:
-    """The frozen result of a fit: its reliability (eqns 43-55) and the data it was fitted to."""
+def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, seconds: dict,
+             settings: Settings | None = None, profile: str = "auto", notices=()) -> Identification:
+    """The frozen result of a fit: its reliability (eqns 43-55), profile-likelihood intervals where
+    the linearised ones are not reliable (profile 'auto'; 'all' or 'none'; needs `settings`), what
+    not to trust (caveats, with the input `notices`) and the data it was fitted to."""
     rel = assess(misfit.evaluate(result.p, jacobian=True), misfit.parameters, misfit.logdet)
     full = misfit if misfit.weighting == "full" else misfit.with_weighting("full")
     standardised = full.whiten(misfit.data.measured - result.x)
     sim = misfit.simulation
+    values = misfit.values(result.p)
+    limits = [parameter_limits(sim, n, values) for n in misfit.parameters.names]
+    profiled = {}
+    if settings is not None and profile != "none" and result.status == "converged" and result.moved:
+        profiled = _profiles(misfit, settings, result, rel, limits, profile == "all")
+    caveats = tuple(notices) + tuple(fit_caveats(result, rel, misfit.parameters, limits, profiled))
     return Identification(
         case, case_hash, misfit.parameters, result, rel, misfit.data, misfit.weighting,
         {k: counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}, dict(seconds),
         getattr(sim, "dofs", 0), len(getattr(sim.mesh, "triangles", ())), getattr(sim, "solver", None),
-        standardised)
+        standardised, profiled, caveats)
+
+
+def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability, limits, every: bool) -> dict:
+    """Profile-likelihood intervals of the parameters whose linearised interval is not reliable: a
+    coefficient of variation of 30 % or more, an interval crossing a bound or the allowed range,
+    or J along the parameter far from the quadratic the linearisation assumes (every: all)."""
+    from .profile import CHI2_1_95, profile_interval
+
+    params = misfit.parameters
+    p, J0 = result.p, result.J
+    lo_lin, hi_lin = rel.interval95()
+    out = {}
+    for i, name in enumerate(params.names):
+        sd = rel.std[i]
+        if not np.isfinite(sd) or sd == 0 or result.at_bound[i]:
+            continue
+        lim = limits[i]
+        lo = max(params.lower[i], lim.lo if lim else -np.inf)
+        hi = min(params.upper[i], lim.hi if lim else np.inf)
+        need = every
+        if not need:
+            positive = lim is not None and lim.lo >= 0
+            need = (positive and sd / abs(p[i]) >= 0.30) or lo_lin[i] < lo or hi_lin[i] > hi
+        if not need:  # J at the linearised interval's ends, the others at their linearised conditional optimum
+            d = rel.covariance[:, i] / rel.covariance[i, i] * 1.96 * sd
+            for sign in (-1, 1):
+                q = p + sign * d
+                if np.all(q >= params.lower) and np.all(q <= params.upper):
+                    try:
+                        rise = misfit.J(q) - J0
+                    except Exception:  # noqa: BLE001 - a failed forward run says the linearisation is off
+                        rise = np.inf
+                    need = need or abs(rise - CHI2_1_95) > 0.25 * CHI2_1_95
+        if need:
+            a, b = profile_interval(misfit, settings, p, J0, i, sd, lo, hi,
+                                    bool(params.log[i]) or (lim is not None and lim.lo > 0))
+            out[name] = (a, b, a == lo, b == hi)  # an end at a limit: the readings do not bound it there
+    return out
 
 
 @dataclass(frozen=True)

@@ -137,6 +137,7 @@ class Misfit:
         self._prior_sqrt = np.sqrt(parameters.prior_precision()[has])
         self._prior_rows = np.zeros((len(self._prior_index), parameters.n))
         self._prior_rows[np.arange(len(self._prior_index)), self._prior_index] = self._prior_sqrt
+        self._held = np.zeros(0)  # prior rows of parameters held fixed (profiles): constant terms of J
 
     # ------------------------------------------------------------------ the one place that whitens
     def whiten(self, v: np.ndarray) -> np.ndarray:
@@ -169,8 +170,9 @@ class Misfit:
         p = np.asarray(p, float)
         pred = self.simulation.predict(self.values(p), self.parameters.names, sensitivities=jacobian)
         prior_r = self._prior_sqrt * (self.parameters.prior_mean[self._prior_index] - p[self._prior_index])
-        r = np.concatenate([self.whiten(self.data.measured - pred.x), prior_r])
-        B = np.vstack([self.whiten(pred.A), self._prior_rows]) if jacobian else None
+        r = np.concatenate([self.whiten(self.data.measured - pred.x), prior_r, self._held])
+        B = np.vstack([self.whiten(pred.A), self._prior_rows, np.zeros((len(self._held), self.n))]) \
+            if jacobian else None
         return Evaluation(p, pred.x, pred.A, r, B, self.m)
 
     def J(self, p: np.ndarray) -> float:
@@ -184,6 +186,22 @@ class Misfit:
         new.data = self.data.with_measured(measured)
         return new
 
+    def holding(self, index: int, value: float) -> "Misfit":
+        """The misfit with parameter `index` held at `value` and the others free (a profile of the
+        likelihood); its prior, if any, stays in J as a constant term."""
+        params = self.parameters
+        keep = [i for i in range(params.n) if i != index]
+        sub = ParameterSet([params.names[i] for i in keep], params.initial[keep], params.lower[keep],
+                           params.upper[keep], params.log[keep], params.prior_mean[keep], params.prior_std[keep],
+                           [params.units[i] for i in keep])
+        base = dict(self.base_values)
+        base[params.names[index]] = float(value)
+        new = Misfit(self.simulation, self.data, sub, base, self.weighting)
+        held = [] if not params.has_prior[index] else \
+            [(params.prior_mean[index] - value) / params.prior_std[index]]
+        new._held = np.concatenate([self._held, held])
+        return new
+
     def with_weighting(self, weighting: str) -> "Misfit":
         return Misfit(self.simulation, self.data, self.parameters, self.base_values, weighting)
 
@@ -194,7 +212,7 @@ class Misfit:
         the current parameters start from `start` (default: their initial values)."""
         simulation = simulation or self.simulation
         values = {**{k: v for k, v in self.base_values.items()}, **(values or {})}
-        extra, base = resolve(specs, simulation, values)
+        extra, base, _ = resolve(specs, simulation, values)
         current = self.parameters if start is None else self.parameters.with_initial(start)
         params = current + extra
         constants = {n for n in params.names if is_constant(n)}

@@ -6,12 +6,14 @@ starts from (the case's values, extensions at their null values).
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from .errors import GeobackError
+from .limits import CONSTANT_ANGLE, CONSTANT_LENGTH
 from .simulation import Simulation, is_constant
 
 UNITS = {"A": "m", "B": "m", "C": "rad", "D": "m"}
@@ -55,16 +57,29 @@ class ParameterSet:
                             self.prior_mean, self.prior_std, self.units)
 
 
-def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = None,
-            error=None) -> tuple[ParameterSet, dict]:
-    """Canonical ParameterSet of the `specs` (case Parameter models) and the named values to start
-    from: the simulation's quantities, `values`, and extensions at their null values.
+def parameter_limits(simulation: Simulation, name: str, values: Mapping):
+    """Allowed and usual range of a parameter (``limits.Limits``)."""
+    if is_constant(name):
+        return CONSTANT_ANGLE if name[0] == "C" else CONSTANT_LENGTH
+    return simulation.limits(name, values)
 
-    error(i, message) builds the exception for spec i (e.g. located in the case file)."""
-    error = error or (lambda i, message: GeobackError(message))
+
+def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = None,
+            error=None) -> tuple[ParameterSet, dict, list]:
+    """Canonical ParameterSet of the `specs` (case Parameter models), the named values to start
+    from (the simulation's quantities, `values`, extensions at their null values), and notices
+    (``caveats.Caveat``) about unusual initial values.
+
+    Every parameter stays inside its allowed range (``limits``): an initial value, prior or bounds
+    outside it are refused, and the bounds the fit uses are the case's bounds within that range.
+    error(i, message, field) builds the exception for spec i (e.g. located in the case file)."""
+    from .caveats import Caveat
+
+    error = error or (lambda i, message, field="name": GeobackError(message))
     base = dict(simulation.quantities())
     base.update(values or {})
     names, init, lo, hi, log, pm, ps, units = [], [], [], [], [], [], [], []
+    notices = []
     constants = set(simulation.survey.constant_names)
     for i, p in enumerate(specs):
         if is_constant(p.name):
@@ -85,17 +100,42 @@ def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = No
         if name in names:
             raise error(i, f"'{p.name}' is the same parameter as '{specs[names.index(name)].name}': "
                            "list each parameter once")
+        lim = parameter_limits(simulation, name, base)
+        span = f"{lim.lo:g} to {lim.hi:g}" + (f" {unit}" if unit not in ("-", "") else "")
+        if not lim.contains(p.initial):
+            raise error(i, f"expected an initial value of {name} within its allowed range ({span}), found "
+                           f"{p.initial:g}", "initial")
+        b_lo, b_hi = (p.bounds if p.bounds else (-np.inf, np.inf))
+        b_lo, b_hi = max(b_lo, lim.lo), min(b_hi, lim.hi)
+        if not b_lo < b_hi:
+            raise error(i, f"expected bounds overlapping the allowed range of {name} ({span}), found "
+                           f"[{p.bounds[0]:g}, {p.bounds[1]:g}]", "bounds")
+        if p.prior is not None:
+            if not lim.contains(p.prior.mean):
+                raise error(i, f"expected a prior mean of {name} within its allowed range ({span}), found "
+                               f"{p.prior.mean:g}", "prior")
+            floor = 1e-9 * max(abs(p.prior.mean), abs(p.initial), 1e-12)
+            if p.prior.std < floor:
+                raise error(i, f"expected a prior std of at least {floor:.3g} (1e-9 of the parameter's size), found "
+                               f"{p.prior.std:g}; to fix {name}, leave it out of the parameters and give its value "
+                               "in the case", "prior")
+        if not lim.plausible[0] <= p.initial <= lim.plausible[1]:
+            notices.append(Caveat("implausible-input",
+                                  f"the initial value of {name}, {p.initial:g}" + (f" {unit}" if unit not in ("-", "")
+                                                                                    else "")
+                                  + f", is outside the usual range for ground ({lim.plausible[0]:g} to "
+                                    f"{lim.plausible[1]:g}); check its unit", name))
         names.append(name)
         init.append(p.initial)
-        lo.append(p.bounds[0] if p.bounds else -np.inf)
-        hi.append(p.bounds[1] if p.bounds else np.inf)
+        lo.append(b_lo)
+        hi.append(b_hi)
         log.append(p.log)
         pm.append(p.prior.mean if p.prior else np.nan)
         ps.append(p.prior.std if p.prior else np.nan)
         units.append(unit)
     params = ParameterSet(names, np.array(init, float), np.array(lo, float), np.array(hi, float),
                           np.array(log, bool), np.array(pm, float), np.array(ps, float), units)
-    return params, base
+    return params, base, notices
 
 
 def _hint(name: str, simulation: Simulation) -> str:
@@ -106,3 +146,59 @@ def _hint(name: str, simulation: Simulation) -> str:
         return "known: " + ", ".join(same)
     return "known names: " + ", ".join(known[:12]) + (", ..." if len(known) > 12 else "") + \
         "; extensions such as Egrad[layer], n[layer], K0grad, beta"
+
+
+_SCALES = {"kPa": {"pa": 1e-3, "kpa": 1.0, "mpa": 1e3, "gpa": 1e6},
+           "kPa/m": {"pa/m": 1e-3, "kpa/m": 1.0, "mpa/m": 1e3},
+           "m": {"m": 1.0, "cm": 1e-2, "mm": 1e-3},
+           "rad": {"rad": 1.0, "mrad": 1e-3},
+           "1/m": {"1/m": 1.0}}
+
+
+def parse_quantity(text, unit: str) -> float:
+    """A value as the case file accepts it: a number in the quantity's SI unit, or a number with a
+    unit of the same kind ('50 MPa' for a modulus in kPa, '4 mm' for a length in m)."""
+    if isinstance(text, (int, float)) and not isinstance(text, bool):
+        return float(text)
+    m = re.fullmatch(r"\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z/]+)?\s*", str(text))
+    if not m:
+        raise ValueError(f"expected a number{f' (in {unit})' if unit not in ('-', '') else ''}, found '{text}'")
+    value = float(m.group(1))
+    if m.group(2):
+        scales = _SCALES.get(unit, {})
+        factor = scales.get(m.group(2).lower())
+        if factor is None:
+            raise ValueError(f"expected a unit of {unit} ({', '.join(scales) or 'none: a plain number'}), "
+                             f"found '{m.group(2)}'")
+        value *= factor
+    if not np.isfinite(value):
+        raise ValueError(f"expected a finite number, found '{text}'")
+    return value
+
+
+def resolve_values(simulation: Simulation, assignments: Mapping[str, object]) -> dict[str, float]:
+    """Named values given by a person (``--set E[clay]=50 MPa``): canonical names, values in SI,
+    each checked against the quantities the simulation knows and their allowed range."""
+    out: dict[str, float] = {}
+    base = dict(simulation.quantities())
+    for raw, text in assignments.items():
+        if is_constant(raw):
+            if raw not in simulation.survey.constant_names:
+                known = ", ".join(simulation.survey.constant_names) or "none (no linewise instrument)"
+                raise GeobackError(f"unknown name '{raw}': the instruments' integration constants are {known}")
+            name, unit = raw, UNITS[raw[0]]
+        else:
+            name = simulation.canonical(raw)
+            if name is None:
+                raise GeobackError(f"unknown name '{raw}' ({_hint(raw, simulation)})")
+            unit = simulation.unit(name)
+        try:
+            value = parse_quantity(text, unit)
+        except ValueError as exc:
+            raise GeobackError(f"{raw}={text}: expected NAME=NUMBER, with a unit if wished as in the case file "
+                               f"({exc})") from None
+        lim = parameter_limits(simulation, name, {**base, **out})
+        if not lim.contains(value):
+            raise GeobackError(f"{raw}: expected a value within {lim.lo:g} to {lim.hi:g} {unit}, found {value:g}")
+        out[name] = value
+    return out

@@ -35,14 +35,23 @@ class Reliability:
     aic: float
     bic: float
     undetermined: list[str]  # plain-words description of combinations the readings cannot fix
+    log: np.ndarray | None = None  # parameters identified as ln p: their intervals are made in log space
 
     @property
     def reduced_chi2(self) -> float:
         return self.chi2 / self.dof if self.dof > 0 else float("nan")
 
     def interval95(self) -> tuple[np.ndarray, np.ndarray]:
+        """Linearised 95 % intervals: p +- 1.96 std, or for a log-transformed parameter
+        exp(ln p +- 1.96 std / p) (the same linearisation made where the fit works)."""
         z = special.ndtri(0.975)
-        return self.p - z * self.std, self.p + z * self.std
+        lo, hi = self.p - z * self.std, self.p + z * self.std
+        if self.log is not None and np.any(self.log):
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                f = np.exp(z * self.std / np.abs(self.p))
+            lo = np.where(self.log, self.p / f, lo)
+            hi = np.where(self.log, self.p * f, hi)
+        return lo, hi
 
 
 def chi2_sf(x: float, dof: int) -> float:
@@ -96,4 +105,5 @@ def assess(ev, params, logdet: float) -> Reliability:
     pval = chi2_sf(chi2, dof)
     m2logL = chi2 + logdet + m * np.log(2 * np.pi)
     return Reliability(list(names), p, Cp, std, corr, s, Vt.T, cond, Q, np.diag(Q).copy(), rw.copy(), chi2, dof,
-                       pval, float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined)
+                       pval, float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined,
+                       np.asarray(params.log, bool))

@@ -21,18 +21,24 @@ def reading_label(lab) -> str:
 def summary(res, exploration=None) -> dict:
     f, rel, params = res.fit, res.reliability, res.parameters
     lo, hi = rel.interval95()
+    lo, hi = res.intervals95()
     out = {
         "case": res.name,
         "case_hash": res.case_hash,
         "geoback_version": __version__,
-        "status": f.status,
+        "status": res.status,
+        "converged": f.status == "converged",
         "stop_reason": f.reason,
         "method": f.method,
         "weighting": res.weighting,
         "iterations": f.iterations,
         "parameters": {n: {"unit": params.units[i], "initial": params.initial[i], "estimate": f.p[i],
-                           "std": rel.std[i], "ci95": [lo[i], hi[i]], "at_bound": bool(f.at_bound[i])}
+                           "std": rel.std[i], "ci95": [lo[i], hi[i]],
+                           "ci95_method": "profile likelihood" if n in res.profiled else "linearised",
+                           "ci95_open": list(res.profiled[n][2:]) if n in res.profiled else [False, False],
+                           "at_bound": bool(f.at_bound[i])}
                        for i, n in enumerate(params.names)},
+        "warnings": [c.as_dict() for c in res.caveats],
         "J": f.J, "chi2": rel.chi2, "dof": rel.dof, "reduced_chi2": rel.reduced_chi2, "p_value": rel.p_value,
         "minus_2_log_likelihood": rel.minus2logL, "aic": rel.aic, "bic": rel.bic,
         "condition_number": rel.condition, "undetermined": rel.undetermined,
@@ -47,11 +53,19 @@ def summary(res, exploration=None) -> dict:
     return out
 
 
+def _cv(value: float, std: float) -> str:
+    if value == 0 or not np.isfinite(std):
+        return ""
+    return f" ({100 * std / abs(value):.0f} %)" if std / abs(value) >= 0.01 else f" ({100 * std / abs(value):.2g} %)"
+
+
 def report_text(res) -> str:
-    """A one-page report in the spirit of lmfit's fit_report."""
+    """A one-page report in the spirit of lmfit's fit_report, warnings first."""
     f, rel, params = res.fit, res.reliability, res.parameters
     lines = [f"# geoback fit report: {res.name}", ""]
-    lines += [f"- status: **{f.status}** ({f.reason})",
+    if res.caveats:
+        lines += ["**Warnings**", ""] + [f"- [{c.code}] {c.message}" for c in res.caveats] + [""]
+    lines += [f"- status: **{res.status}** ({f.reason})",
               f"- method: {f.method}, {f.iterations} iterations, {res.counts['factorisations']} factorisation(s), "
               f"{res.counts['solves']} solves",
               f"- readings m = {res.data.m}, parameters n = {params.n}, dofs = {res.dofs}",
@@ -59,12 +73,16 @@ def report_text(res) -> str:
               f"p-value = {rel.p_value:.3g}",
               f"- AIC = {rel.aic:.6g}, BIC = {rel.bic:.6g}, condition number = {rel.condition:.3g}", "",
               "| parameter | unit | initial | estimate | std | 95 % interval |", "|---|---|---|---|---|---|"]
-    lo, hi = rel.interval95()
+    lo, hi = res.intervals95()
     for i, n in enumerate(params.names):
-        pct = f" ({100 * rel.std[i] / abs(f.p[i]):.2g} %)" if f.p[i] != 0 and np.isfinite(rel.std[i]) else ""
         bound = " (at bound)" if f.at_bound[i] else ""
+        how, (lo_open, hi_open) = "", (False, False)
+        if n in res.profiled:
+            how, (lo_open, hi_open) = " (profile likelihood)", res.profiled[n][2:]
+        ends = (f"≤ its bound {lo[i]:.6g}" if lo_open else f"{lo[i]:.6g}",
+                f"≥ its bound {hi[i]:.6g}" if hi_open else f"{hi[i]:.6g}")
         lines.append(f"| {n} | {params.units[i]} | {params.initial[i]:.6g} | {f.p[i]:.6g}{bound} | "
-                     f"{rel.std[i]:.3g}{pct} | [{lo[i]:.6g}, {hi[i]:.6g}] |")
+                     f"{rel.std[i]:.3g}{_cv(f.p[i], rel.std[i])} | [{ends[0]}, {ends[1]}]{how} |")
     strong = [(params.names[i], params.names[j], rel.correlation[i, j])
               for i in range(params.n) for j in range(i + 1, params.n)
               if np.isfinite(rel.correlation[i, j]) and abs(rel.correlation[i, j]) > 0.5]
@@ -73,19 +91,6 @@ def report_text(res) -> str:
     top = np.argsort(-rel.leverage)[:3]
     lines += ["", "Most informative readings (leverage = diag Q): " +
               ", ".join(f"{reading_label(res.data.labels[i])} ({rel.leverage[i]:.2f})" for i in top)]
-    warnings = []
-    if f.status != "converged":
-        warnings.append(f"the fit did not converge: {f.reason}")
-    if rel.undetermined:
-        warnings.append("the readings cannot determine: " + "; ".join(rel.undetermined) +
-                        " (standard deviations of the parameters involved are infinite)")
-    if rel.dof > 0 and rel.p_value < 0.05:
-        warnings.append(f"chi-square is too large for the stated measurement errors (p = {rel.p_value:.2g}): "
-                        "the model may be missing physics - try `geoback diagnose`")
-    if f.at_bound.any():
-        warnings.append("at a bound: " + ", ".join(n for n, b in zip(params.names, f.at_bound) if b))
-    if warnings:
-        lines += ["", "Warnings:"] + [f"- {w}" for w in warnings]
     return "\n".join(lines) + "\n"
 
 
@@ -103,10 +108,11 @@ def write_run(res, out: Path, exploration=None, plots: bool = False) -> None:
     f, rel, params = res.fit, res.reliability, res.parameters
     names = params.names
     out = Path(out)
-    lo, hi = rel.interval95()
+    lo, hi = res.intervals95()
     write_csv(out / "parameters.csv",
-              ["name", "unit", "initial", "estimate", "std", "ci95_low", "ci95_high", "at_bound"],
-              [[n, params.units[i], params.initial[i], f.p[i], rel.std[i], lo[i], hi[i], bool(f.at_bound[i])]
+              ["name", "unit", "initial", "estimate", "std", "ci95_low", "ci95_high", "ci95_method", "at_bound"],
+              [[n, params.units[i], params.initial[i], f.p[i], rel.std[i], lo[i], hi[i],
+                "profile likelihood" if n in res.profiled else "linearised", bool(f.at_bound[i])]
                for i, n in enumerate(names)])
     write_matrix_csv(out / "covariance.csv", names, rel.covariance)
     write_matrix_csv(out / "correlation.csv", names, rel.correlation)
@@ -117,9 +123,9 @@ def write_run(res, out: Path, exploration=None, plots: bool = False) -> None:
     measured = res.data.measured
     residual = measured - f.x
     write_csv(out / "readings.csv",
-              ["instrument", "kind", "station", "component", "x", "y", "measured", "computed", "residual",
+              ["instrument", "kind", "station", "stage", "component", "x", "y", "measured", "computed", "residual",
                "whitened_residual", "leverage"],
-              [[lab.instrument, lab.kind, lab.station, lab.component, lab.x, lab.y, measured[i],
+              [[lab.instrument, lab.kind, lab.station, lab.stage or "", lab.component, lab.x, lab.y, measured[i],
                 f.x[i], residual[i], rel.whitened_residual[i], rel.leverage[i]] for i, lab in enumerate(res.data.labels)])
     write_csv(out / "iterations.csv", ["iteration", "mu", "J"] + names + ["accepted"],
               [[h.k, h.mu, h.J] + list(h.p) + [h.accepted] for h in f.history])

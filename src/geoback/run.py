@@ -8,7 +8,7 @@ from .identification import Identification, identify, prepare
 
 
 def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=None, vtu: bool | None = None,
-             plots: bool = False, say=None, prepared=None) -> Identification:
+             plots: bool = False, say=None, prepared=None, profile: str = "auto") -> Identification:
     """identify() the case, explore what the field file and figures need, write all outputs to `out`.
 
     progress(iteration) follows the fit; say(text) the steps after it; prepared(analysis) is
@@ -19,7 +19,7 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
     analysis = prepare(loaded)
     if prepared is not None:
         prepared(analysis)
-    res = identify(analysis, method=method, progress=progress)
+    res = identify(analysis, method=method, progress=progress, profile=profile)
     vtu = loaded.case.output.vtu if vtu is None else vtu
     what = ("field",) if vtu else ()
     if plots:

@@ -12,7 +12,7 @@ from .identification import Analysis, prepare
 from .errors import GeobackError
 from .outputs import write_csv, write_json
 from .readings import measured_values
-from .simulation import is_constant
+from .parameters import resolve_values
 
 READING_HEADER = ["instrument", "kind", "station", "component", "x", "y", "computed"]
 
@@ -75,16 +75,14 @@ def synthetic_readings(loaded: LoadedCase, refine: float = 2.0, values: Mapping 
                        noise_seed: int | None = None, noise_scale: float = 1.0) -> dict[str, np.ndarray]:
     """Readings of every instrument from a finer mesh, optionally with noise drawn from C_x.
 
-    `values` overrides named quantities (e.g. {'Egrad[clay]': 500, 'B[I1]': 0.002}); noise is L z
+    `values` overrides named quantities, by name as in a case file, with units if wished (e.g.
+    {'Egrad[clay]': 500, 'E': '12 MPa', 'B[I1]': 0.002}); unknown names are refused. Noise is L z
     with C_x = L L^t per instrument (eqn 10), seeded."""
     fine = LoadedCase(refined_case(loaded.case, refine), loaded.path, loaded.marks)
     analysis = prepare(fine, parameters=[], with_readings=False)
     sim = analysis.simulation
     named = dict(analysis.values)
-    for name, v in (values or {}).items():
-        if is_constant(name) and name not in sim.survey.constant_names:
-            raise ValueError(f"no linewise instrument has the integration constant '{name}'")
-        named[name] = v
+    named.update(resolve_values(sim, values or {}))
     x = sim.predict(named).x  # a reference end that moved: readings = P u - G c (eqns 11, 15, 18)
     rng = np.random.default_rng(noise_seed) if noise_seed is not None else None
     out, offset = {}, 0
@@ -97,7 +95,11 @@ def synthetic_readings(loaded: LoadedCase, refine: float = 2.0, values: Mapping 
     return out
 
 
-def write_readings_csv(loaded, readings: dict[str, np.ndarray], path: Path) -> None:
-    """Readings in the CSV layout `readings_file` accepts (instrument, station, reading)."""
+def write_readings_csv(loaded, readings: dict[str, np.ndarray], path: Path, notes: list[str] = ()) -> None:
+    """Readings in the CSV layout `readings_file` accepts (instrument, station, reading), exact to the
+    last digit, after `notes` as comment lines (how the data were made)."""
+    from .outputs import csv_text, write_atomic
+
     rows = [[name, i + 1, v] for name, values in readings.items() for i, v in enumerate(values)]
-    write_csv(Path(path), ["instrument", "station", "reading"], rows)
+    head = "".join(f"# {line}\n" for line in notes)
+    write_atomic(Path(path), head + csv_text(["instrument", "station", "reading"], rows))

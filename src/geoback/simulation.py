@@ -94,6 +94,10 @@ class Simulation(ABC):
     def unit(self, name: str) -> str:
         """Unit of a physical quantity."""
 
+    @abstractmethod
+    def limits(self, name: str, values: Mapping):
+        """Allowed and usual range of a physical quantity (``ground.Limits``)."""
+
     @property
     def stages(self) -> list[str]:
         """Construction stages the simulation computes, in order (readings are taken at them)."""

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..ground import Extension
+from ..limits import MODULUS, Limits
 
 
 def _gradient(f, value, ground, i, values):
@@ -51,14 +52,36 @@ def _release(f, value, ground, i, values):
     f.release = f.release * value
 
 
+def _gradient_limits(values, ground, i) -> Limits:
+    """E stays positive through the layer: Egrad > -E_top / thickness."""
+    E = float(np.real(values[f"E[{ground.layers[i]}]"]))
+    thick = float(ground.bottoms[i] - ground.tops[i])
+    return Limits(-E / thick * (1 - 1e-6), 1e7, (-E / thick * 0.9, 1e4))
+
+
+def _depth_limits(values, ground, i) -> Limits:
+    return Limits(float(ground.tops[i]), float(ground.bottoms[i]), (float(ground.tops[i]), float(ground.bottoms[i])))
+
+
+def _anisotropy_limits(values, ground, i) -> Limits:
+    """Cross-anisotropic stiffness positive definite (with G_vh from E_v): n < (1 - nu) / (2 nu^2)."""
+    nu = float(np.real(values[f"nu[{ground.layers[i]}]"]))
+    top = (1 - nu) / (2 * nu * nu) if nu > 0 else 1e3
+    return Limits(1e-2, min(top * (1 - 1e-6), 1e3), (0.3, min(3.0, top)))
+
+
 EXTENSIONS: dict[str, Extension] = {e.base: e for e in (
-    Extension("Egrad", True, "kPa/m", 0.0, _gradient, "modulus increasing linearly with depth"),
+    Extension("Egrad", True, "kPa/m", 0.0, _gradient, "modulus increasing linearly with depth",
+              limits=_gradient_limits),
     Extension("Esplit", True, "kPa", lambda values, layer: values[f"E[{layer}]"], _split,
-              "another modulus below depth zsplit inside the layer"),
+              "another modulus below depth zsplit inside the layer", limits=MODULUS),
     Extension("zsplit", True, "m", lambda values, layer: np.inf, None,
-              "depth of an unmodelled layer boundary", identifiable=False),
-    Extension("n", True, "-", 1.0, _ratio("n"), "cross-anisotropy E_h / E_v"),
-    Extension("m", True, "-", 1.0, _ratio("m"), "shear modulus G_vh relative to isotropy"),
-    Extension("K0grad", False, "1/m", 0.0, _k0_gradient, "K0 changing linearly with depth"),
-    Extension("beta", False, "-", 1.0, _release, "fraction of the initial stress released"),
+              "depth of an unmodelled layer boundary", identifiable=False, limits=_depth_limits),
+    Extension("n", True, "-", 1.0, _ratio("n"), "cross-anisotropy E_h / E_v", limits=_anisotropy_limits),
+    Extension("m", True, "-", 1.0, _ratio("m"), "shear modulus G_vh relative to isotropy",
+              limits=Limits(1e-2, 1e2, (0.3, 3.0))),
+    Extension("K0grad", False, "1/m", 0.0, _k0_gradient, "K0 changing linearly with depth",
+              limits=Limits(-1.0, 1.0, (-0.1, 0.1))),
+    Extension("beta", False, "-", 1.0, _release, "fraction of the initial stress released",
+              limits=Limits(1e-3, 2.0, (0.05, 1.0))),
 )}

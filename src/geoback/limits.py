@@ -1,0 +1,27 @@
+"""What each kind of quantity may be (refused outside) and usually is (a warning outside).
+
+Plain data with no imports, so that the case checks, the ground and the extension table share
+one statement of the ranges."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What a quantity may be: values outside [lo, hi] are refused (not physical, or beyond what the
+    numerics can honour); outside `plausible` they are unusual for ground and said so."""
+
+    lo: float
+    hi: float
+    plausible: tuple[float, float]
+
+    def contains(self, v: float) -> bool:
+        return self.lo <= v <= self.hi
+
+
+MODULUS = Limits(1e-3, 1e9, (500.0, 2e7))  # kPa: 1 Pa .. 1000 GPa allowed; 0.5 MPa .. 20 GPa usual
+POISSON = Limits(0.0, 0.4999, (0.05, 0.4995))
+EARTH_PRESSURE = Limits(1e-3, 10.0, (0.25, 3.0))
+CONSTANT_LENGTH = Limits(-10.0, 10.0, (-0.5, 0.5))  # m: an instrument's reference end moved
+CONSTANT_ANGLE = Limits(-1.0, 1.0, (-0.05, 0.05))  # rad: a deflectometer's reference end rotated
