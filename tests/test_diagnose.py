@@ -59,3 +59,19 @@ def test_cli_writes_diagnosis_files(tmp_path):
     assert data["adequate_before"] is True and data["missing"] == []
     assert (tmp_path / "diagnosis.md").read_text().startswith("# geoback diagnosis")
     assert (tmp_path / "diagnosis.png").stat().st_size > 0
+
+
+def test_null_case_with_a_moving_model_toe_is_adequate():
+    """Inclinometer readings are relative to the toe (as integrated in the field) and the model is
+    compared as u(z) - u(toe): where the model's own toe moves by more than 5 mm, a null case is
+    still adequate and no 'toe moved' is invented."""
+    from geoback.identification import prepare
+
+    analysis = prepare(load_case(CONCEALED / "null-1.yaml"))
+    sim = analysis.simulation
+    toes = [b for b in sim.survey.blocks if b.kind == "inclinometer"]
+    assert all(b.relative for b in toes)
+    moves = [abs(sim.displacements_at(analysis.values, b.points[-1:])[0, 0]) for b in toes]
+    assert min(moves) >= 0.005, moves
+    d = diagnose(analysis)
+    assert d.adequate_before and not d.accepted

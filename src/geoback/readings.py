@@ -63,14 +63,14 @@ class ReadingsError(CaseError):
 
 # ---------------------------------------------------------------------------------------- files
 def _decode(data: bytes) -> str:
-    if data.startswith(b"\xef\xbb\xbf"):
-        return data[3:].decode("utf-8")
     if data.startswith((b"\xff\xfe", b"\xfe\xff")):
-        return data.decode("utf-16")
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError:
-        return data.decode("cp1252", errors="strict")
+        text = data.decode("utf-16")
+    else:
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            text = data.decode("cp1252", errors="strict")
+    return text.lstrip("\ufeff")  # byte-order marks, even one written twice
 
 
 def _split_unit(header: str) -> tuple[str, str | None]:
@@ -159,7 +159,7 @@ def _default_unit(block: InstrumentBlock) -> str:
 
 
 def _unit_factor(unit: str, block: InstrumentBlock, fail, where: str) -> float:
-    u = unit.strip()
+    u = {k.lower(): k for k in READING_UNITS}.get(unit.strip().lower(), unit.strip())  # 'MM' is mm here
     if u not in READING_UNITS:
         raise fail(f"{where}: expected a reading unit {', '.join(READING_UNITS)}, found '{unit}'")
     kind = {"m": "length", "mm": "length", "cm": "length", "rad": "angle", "mrad": "angle", "1/m": "curvature"}
@@ -336,7 +336,7 @@ def case_readings(loaded: LoadedCase, blocks: list[InstrumentBlock], stages: lis
                 tables[path] = read_table(loaded.folder / ins.readings_file, fail)
             table = tables[path]
             if ins.readings_unit and "value" in table.units and \
-                    READING_UNITS.get(table.units["value"].strip()) != READING_UNITS[ins.readings_unit]:
+                    READING_UNITS.get(table.units["value"].strip().lower()) != READING_UNITS[ins.readings_unit]:
                 raise fail(f"readings_unit '{ins.readings_unit}' disagrees with the file's header unit "
                            f"'{table.units['value']}'")
             if ins.readings_unit and "value" not in table.units:
