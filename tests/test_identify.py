@@ -137,3 +137,17 @@ def test_library_entry_points(paper_case_path):
     res = identify(load_case(paper_case_path))
     assert abs(res.fit.p[0] / 10000 - 1) < 0.005
     assert callable(diagnose)
+
+
+def test_chi2_survival_function_matches_scipy():
+    """reliability.chi2_sf (written to keep scipy.special out of start-up) against gammaincc."""
+    from scipy import special
+
+    from geoback.reliability import chi2_sf
+
+    for dof in (1, 2, 3, 7, 51, 400, 5000):
+        for x in np.concatenate([np.linspace(1e-3, 3 * dof + 60, 120), [1e-9, 1e6]]):
+            expected = float(special.gammaincc(dof / 2, x / 2))
+            got = chi2_sf(x, dof)
+            assert abs(got - expected) <= 1e-9 * expected + 1e-300, (dof, x, got, expected)
+    assert np.isnan(chi2_sf(3.0, 0)) and chi2_sf(0.0, 4) == 1.0

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import cKDTree
 from skfem import ElementLineP1, ElementLineP2, ElementTriP1, ElementTriP2
 from skfem.quadrature import get_quadrature
 from skfem.refdom import RefLine, RefTri
@@ -223,11 +222,8 @@ class FEModel:
     def locate(self, points: np.ndarray, tol: float = 1e-9):
         """Element and reference coordinates of each point; element -1 where outside the mesh."""
         points = np.atleast_2d(np.asarray(points, float))
-        if self._tree is None:
-            self._tree = cKDTree(self.centroid)
         k = min(12, self.ne)
-        _, cand = self._tree.query(points, k=k)
-        cand = cand.reshape(len(points), k)
+        cand = self._nearest_elements(points, k)
         elem = -np.ones(len(points), np.int64)
         ref = np.zeros((len(points), 2))
         best = np.full(len(points), -np.inf)
@@ -242,6 +238,25 @@ class FEModel:
             elem[take], ref[take] = e[take], xi[take]
             best = np.where(better, score, best)
         return elem, ref
+
+    BRUTE_FORCE = 20000  # elements below which candidates are found by brute force (no KD-tree to import)
+
+    def _nearest_elements(self, points: np.ndarray, k: int) -> np.ndarray:
+        """Indices (npts, k) of the k elements whose centroids are nearest each point."""
+        if self.ne > self.BRUTE_FORCE:
+            if self._tree is None:
+                from scipy.spatial import cKDTree
+
+                self._tree = cKDTree(self.centroid)
+            return self._tree.query(points, k=k)[1].reshape(len(points), k)
+        out = np.empty((len(points), k), np.int64)
+        for start in range(0, len(points), 64):
+            chunk = points[start:start + 64]
+            d2 = ((chunk[:, None, :] - self.centroid[None, :, :]) ** 2).sum(axis=2)
+            near = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < self.ne else np.argsort(d2, axis=1)[:, :k]
+            order = np.argsort(np.take_along_axis(d2, near, axis=1), axis=1)
+            out[start:start + 64] = np.take_along_axis(near, order, axis=1)
+        return out
 
     def _inverse_map(self, elems: np.ndarray, points: np.ndarray) -> np.ndarray:
         coords = self.nodes[self.tri[elems]]  # (n, nb, 2)

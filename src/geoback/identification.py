@@ -279,8 +279,7 @@ def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability,
     """Profile-likelihood intervals of the parameters whose linearised interval is not reliable: a
     coefficient of variation of 30 % or more, an interval crossing a bound or the allowed range,
     or J along the parameter far from the quadratic the linearisation assumes (every: all)."""
-    from .profile import CHI2_1_95, profile_interval
-
+    CHI2_1_95 = 3.841458820694124  # chi^2_1 at 95 % (profile.CHI2_1_95; scipy.optimize loads only if needed)
     params = misfit.parameters
     p, J0 = result.p, result.J
     lo_lin, hi_lin = rel.interval95()
@@ -307,6 +306,8 @@ def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability,
                         rise = np.inf
                     need = need or abs(rise - CHI2_1_95) > 0.25 * CHI2_1_95
         if need:
+            from .profile import profile_interval
+
             a, b = profile_interval(misfit, settings, p, J0, i, sd, lo, hi,
                                     bool(params.log[i]) or (lim is not None and lim.lo > 0))
             out[name] = (a, b, a == lo, b == hi)  # an end at a limit: the readings do not bound it there

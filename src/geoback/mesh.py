@@ -77,10 +77,30 @@ def cache_dir() -> Path:
     return Path(root) if root else Path.home() / ".cache" / "geoback"
 
 
-def mesh_key(inputs: dict) -> str:
+def gmsh_version() -> str:
+    """gmsh's version, read from its Python module without loading the library (a cached mesh then
+    costs no gmsh start-up)."""
+    import importlib.util
+    import re
+
+    spec = importlib.util.find_spec("gmsh")
+    if spec is None or not spec.origin:
+        return "none"
+    try:
+        with open(spec.origin, encoding="utf-8") as fh:
+            head = fh.read(20000)
+    except OSError:
+        head = ""
+    m = re.search(r'^GMSH_API_VERSION\s*=\s*"([^"]+)"', head, re.M) or re.search(r'^__version__\s*=\s*"([^"]+)"', head, re.M)
+    if m:
+        return m.group(1)
     import gmsh
 
-    text = json.dumps(inputs, sort_keys=True) + gmsh.__version__
+    return gmsh.__version__
+
+
+def mesh_key(inputs: dict) -> str:
+    text = json.dumps(inputs, sort_keys=True) + gmsh_version()
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
@@ -225,7 +245,16 @@ def _run_gmsh(inputs: dict, key: str) -> Mesh:
 
 
 def write_mesh(mesh: Mesh, path: Path, point_data: dict | None = None, cell_data: dict | None = None) -> None:
-    """Write the mesh (and optional fields) with meshio; format from the suffix (.msh, .vtu)."""
+    """Write the mesh (and optional fields); format from the suffix: .vtu (geoback.vtu) or .msh
+    (gmsh 2.2 through meshio, with one physical group per layer and 100 for the tunnel wall)."""
+    path = Path(path)
+    if path.suffix == ".vtu":
+        from .outputs import write_atomic
+        from .vtu import vtu_text
+
+        cdata = {"region": mesh.region.astype(np.int32), **(cell_data or {})}
+        write_atomic(path, vtu_text(mesh.nodes, mesh.triangles, point_data, cdata))
+        return
     import meshio
 
     cell_type = "triangle6" if mesh.order == 2 else "triangle"
