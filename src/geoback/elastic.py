@@ -41,6 +41,19 @@ def proportion(a: np.ndarray, b: np.ndarray) -> float | None:
     return s if float(np.abs(a - s * b).max()) <= PROPORTIONAL * scale else None
 
 
+class _Load:
+    """The excavation load f = -int N^t sigma0 n dS of a ground state, assembled on first use."""
+
+    def __init__(self, fe: FEModel, state):
+        self.fe, self.state, self._f = fe, state, None
+
+    @property
+    def vector(self) -> np.ndarray:
+        if self._f is None:
+            self._f = self.fe.load(self.state.sigma_v, self.state.sigma_h)
+        return self._f
+
+
 class ElasticSimulation(Simulation):
     """A case meshed and assembled, predicting readings of its instruments for any values."""
 
@@ -135,9 +148,9 @@ class ElasticSimulation(Simulation):
         fact, s = self._factorised(st.coeffs)
         self.counters.forward_runs += 1
         coords = np.concatenate([st.sigma_v, st.sigma_h])
-        f = self.fe.load(st.sigma_v, st.sigma_h)
-        u = self._solve(fact, s, f, coords)
-        out = (st, fact, s, coords, f, u)
+        load = _Load(self.fe, st)  # assembled only if the span of earlier loads cannot answer
+        u = self._solve(fact, s, lambda cols: load.vector, coords)
+        out = (st, fact, s, coords, load, u)
         self._last = (key, out)
         return out
 
@@ -146,24 +159,27 @@ class ElasticSimulation(Simulation):
         return self._forward(values)[-1]
 
     def _readings(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
-        st, fact, s, coords, f, u = self._forward(values)
+        st, fact, s, coords, f, u = self._forward(values)  # f: the load (a _Load)
         x = self.survey.P @ u
         if not wrt:
             return Prediction(x)
         du = np.empty((self.fe.nfree, len(wrt)))
         keyed, raw = [], []  # sensitivities whose load is known by its wall stresses, and the others
         for j, d in enumerate(self.ground.derivatives(values, list(wrt))):
-            r = self.fe.load(d.sigma_v, d.sigma_h)
             dcoords = np.concatenate([d.sigma_v, d.sigma_h])
             alpha = proportion(d.coeffs, st.coeffs) if np.any(d.coeffs) else 0.0
             if alpha is not None:  # dK/dv = alpha K (a modulus scaling K): dK/dv u = alpha f (eqn 42)
-                keyed.append((j, r - alpha * f, dcoords - alpha * coords))
+                keyed.append((j, d, alpha, dcoords - alpha * coords))
             else:
+                r = self.fe.load(d.sigma_v, d.sigma_h)
                 raw.append((j, r - self.fe.symmetric_product(self.fe.matrix(d.coeffs), u)))
         if keyed:
-            cols = [j for j, _, _ in keyed]
-            du[:, cols] = self._solve(fact, s, np.column_stack([r for _, r, _ in keyed]),
-                                      np.column_stack([c for _, _, c in keyed]))
+            def rhs(cols):  # df/dv - alpha f, assembled for the columns the span cannot answer
+                return np.column_stack([self.fe.load(keyed[c][1].sigma_v, keyed[c][1].sigma_h)
+                                        - keyed[c][2] * f.vector for c in cols])
+
+            cols = [j for j, _, _, _ in keyed]
+            du[:, cols] = self._solve(fact, s, rhs, np.column_stack([c for _, _, _, c in keyed]))
         if raw:
             du[:, [j for j, _ in raw]] = self._solve(fact, s, np.column_stack([r for _, r in raw]))
         return Prediction(x, np.asarray(self.survey.P @ du))

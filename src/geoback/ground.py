@@ -204,6 +204,8 @@ class Ground:
 
     def state(self, values: Mapping) -> GroundState:
         """Element coefficients and released wall stresses (eqns 32, 39-40); complex-safe."""
+        if not any(name.partition("[")[0] in self.extensions for name in values):
+            return self._layered_state(values)
         f = self.fields(values)
         if np.all(f.n == 1.0) and np.all(f.m == 1.0):  # exactly isotropic (no perturbation either)
             d = plane_strain_isotropic(f.E, f.nu)
@@ -212,6 +214,16 @@ class Ground:
         coeffs = np.column_stack(d)
         sv = -self.case.ground.unit_weight * self.wall_depth * f.release
         return GroundState(coeffs, np.asarray(sv, dtype=coeffs.dtype), f.k0 * sv)
+
+    def _layered_state(self, values: Mapping) -> GroundState:
+        """state() of layer-wise constant isotropic ground (no extension): D of each layer, spread
+        over its elements, the same numbers as the general path computes element by element."""
+        dtype = complex if any(isinstance(v, complex) for v in values.values()) else float
+        table = np.array([plane_strain_isotropic(values[f"E[{n}]"], values[f"nu[{n}]"]) for n in self.layers],
+                         dtype=dtype).reshape(len(self.layers), 4)
+        k0 = np.array([self.layer_k0(values, i) for i in range(len(self.layers))], dtype=dtype)
+        sv = -self.case.ground.unit_weight * self.wall_depth
+        return GroundState(table[self.element_region], sv.astype(dtype), k0[self.wall_region] * sv)
 
     def derivatives(self, values: Mapping, names: list[str]) -> list[GroundState]:
         """d state / d value for each name, by complex step (exact for this analytic map)."""

@@ -96,35 +96,43 @@ class Factorisation:
             out = np.column_stack([self._lu.solve(np.ascontiguousarray(rhs[:, j])) for j in range(rhs.shape[1])])
         return np.asarray(out).reshape(rhs.shape)
 
-    def solve(self, rhs: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
+    def solve(self, rhs, coords: np.ndarray | None = None) -> np.ndarray:
         """K^-1 rhs for one or several right-hand sides (columns).
 
         coords: the right-hand sides' coordinates in a small space of the caller's (rhs = M coords
         for a fixed linear map M, e.g. loads from the stresses at the wall's quadrature points).
         The span test is then made on the coordinates, whose rounding does not grow with the
-        number of unknowns; without them it is made on the right-hand sides themselves.
+        number of unknowns; without them it is made on the right-hand sides themselves. With
+        coords, rhs may be a function of the list of columns to build: it is then called only for
+        the right-hand sides the span cannot answer.
         """
-        rhs = np.asarray(rhs, dtype=float)
-        B = rhs.reshape(self.n, -1)
-        if coords is None:
-            basis, keys = self._raw, B
+        if callable(rhs):
+            keys = np.asarray(coords, dtype=float)
+            shape = (self.n,) if keys.ndim == 1 else (self.n, keys.shape[1])
+            keys = keys.reshape(keys.shape[0], -1)
+            build = rhs
         else:
-            keys = np.asarray(coords, dtype=float).reshape(-1, B.shape[1])
-            basis = self._coords.setdefault(keys.shape[0], _SpanBasis(keys.shape[0], self.n))
-        out = np.zeros_like(B)
+            rhs = np.asarray(rhs, dtype=float)
+            shape = rhs.shape
+            B = rhs.reshape(self.n, -1)
+            keys = B if coords is None else np.asarray(coords, dtype=float).reshape(-1, B.shape[1])
+            build = (lambda cols: B[:, cols])
+        basis = self._raw if coords is None else \
+            self._coords.setdefault(keys.shape[0], _SpanBasis(keys.shape[0], self.n))
+        out = np.zeros((self.n, keys.shape[1]))
         todo = []
-        for j in range(B.shape[1]):
+        for j in range(keys.shape[1]):
             hit = basis.lookup(keys[:, j])
             if hit is None:
                 todo.append(j)
             else:
                 out[:, j] = hit
         if todo:
-            X = self._backsolve(B[:, todo])
+            X = self._backsolve(np.asarray(build(todo), dtype=float).reshape(self.n, len(todo)))
             for k, j in enumerate(todo):
                 out[:, j] = X[:, k]
                 basis.remember(keys[:, j], X[:, k])
-        return out.reshape(rhs.shape)
+        return out.reshape(shape)
 
     def release(self) -> None:
         if self.backend == "pardiso":
