@@ -278,7 +278,8 @@ def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, se
 def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability, limits, every: bool) -> dict:
     """Profile-likelihood intervals of the parameters whose linearised interval is not reliable: a
     coefficient of variation of 30 % or more, an interval crossing a bound or the allowed range,
-    or J along the parameter far from the quadratic the linearisation assumes (every: all)."""
+    or J at the linearised interval's ends off the expected rise of 3.84 by more than a factor of
+    two (every: all)."""
     CHI2_1_95 = 3.841458820694124  # chi^2_1 at 95 % (profile.CHI2_1_95; scipy.optimize loads only if needed)
     params = misfit.parameters
     p, J0 = result.p, result.J
@@ -304,7 +305,7 @@ def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability,
                         rise = misfit.J(q) - J0
                     except Exception:  # noqa: BLE001 - a failed forward run says the linearisation is off
                         rise = np.inf
-                    need = need or abs(rise - CHI2_1_95) > 0.25 * CHI2_1_95
+                    need = need or not 0.5 * CHI2_1_95 <= rise <= 2 * CHI2_1_95  # off by a factor 2
         if need:
             from .profile import profile_interval
 

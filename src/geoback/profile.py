@@ -17,41 +17,55 @@ CHI2_1_95 = 3.841458820694124
 MAX_STEPS = 40
 
 
-def _profile_J(misfit, settings: Settings, i: int, value: float, start: np.ndarray) -> float:
-    """min over the other parameters of J with parameter i held at `value`."""
-    if misfit.n == 1:
-        return misfit.J(np.array([value]))
-    held = misfit.holding(i, value)
-    return fit(held, settings, p0=np.delete(start, i), max_iterations=50).J
+class _Profile:
+    """J minimised over the other parameters with parameter i held, each fit started from the
+    nearest point already profiled (continuation: a few iterations each)."""
+
+    def __init__(self, misfit, settings: Settings, i: int, p_hat: np.ndarray):
+        self.misfit, self.settings, self.i = misfit, settings, i
+        self.done = [(float(p_hat[i]), np.delete(p_hat, i))]
+        self.fits = 0
+
+    def __call__(self, value: float) -> float:
+        if self.misfit.n == 1:
+            return self.misfit.J(np.array([value]))
+        start = min(self.done, key=lambda d: abs(d[0] - value))[1]
+        f = fit(self.misfit.holding(self.i, value), self.settings, p0=start, max_iterations=50)
+        self.fits += 1
+        self.done.append((value, f.p))
+        return f.J
 
 
 def profile_interval(misfit, settings: Settings, p_hat: np.ndarray, J_min: float, i: int, std: float,
                      lo_limit: float, hi_limit: float, log: bool) -> tuple[float, float]:
     """95 % profile-likelihood interval of parameter i; an end that reaches its limit (a bound or
-    the allowed range) without J rising enough is that limit (then the interval is open there)."""
+    the allowed range) without J rising enough is that limit (then the interval is open there).
+    Ends are found to 1e-4 of the parameter's size (four significant digits)."""
     target = J_min + CHI2_1_95
     x0 = float(p_hat[i])
+    J = _Profile(misfit, settings, i, p_hat)
 
     def g(v):
-        return _profile_J(misfit, settings, i, v, p_hat) - target
+        return J(v) - target
 
     ends = []
     for sign in (-1.0, 1.0):
         limit = lo_limit if sign < 0 else hi_limit
-        # step outwards, in ln p for positive parameters, starting at a third of the linearised half-width
+        # first try the linearised end, then step outwards (in ln p for positive parameters), faster and faster
+        half = 1.96 * std if np.isfinite(std) and std > 0 else 0.1 * max(abs(x0), 1e-12)
         if log and x0 > 0:
-            step = np.log1p(min(max(std / x0, 1e-4), 5.0) * 1.96 / 3) if np.isfinite(std) else 0.1
-            at = (lambda k: x0 * np.exp(sign * step * k))
+            step = np.log1p(min(half / x0, 20.0))
+            at = (lambda t: x0 * np.exp(sign * step * t))
         else:
-            step = (1.96 * std / 3) if np.isfinite(std) and std > 0 else max(abs(x0), 1.0) * 0.05
-            at = (lambda k: x0 + sign * step * k)
+            at = (lambda t: x0 + sign * half * t)
         inside, end = x0, None
-        for k in range(1, MAX_STEPS + 1):
-            v = at(2 ** (k // 4) * k)  # a little faster the further it goes
+        for k in range(MAX_STEPS):
+            v = at(1.5 ** k)
             if (sign < 0 and v <= limit) or (sign > 0 and v >= limit):
                 v = limit
             if g(v) >= 0:
-                end = optimize.brentq(g, min(inside, v), max(inside, v), xtol=1e-6 * max(abs(x0), 1e-12), rtol=1e-6)
+                end = optimize.brentq(g, min(inside, v), max(inside, v), xtol=1e-4 * max(abs(x0), 1e-12),
+                                      rtol=1e-6)
                 break
             inside = v
             if v == limit:
