@@ -2,10 +2,7 @@
 at once with a located message; legitimate anchors, aliases and merge keys keep working."""
 from __future__ import annotations
 
-import os
 import re
-import subprocess
-import sys
 import time
 import tracemalloc
 from pathlib import Path
@@ -17,6 +14,7 @@ from geoback import yamlmarks
 from geoback.case import load_case
 from geoback.errors import CaseError
 from geoback.yamlmarks import parse_yaml_with_marks
+from measure import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "cases" / "tunnel-paper.yaml"
@@ -110,17 +108,12 @@ def test_alias_bomb_through_the_cli(tmp_path):
     """The real command: refused in well under a second and a few MB beyond the interpreter."""
     path = tmp_path / "bomb.yaml"
     path.write_text(alias_bomb(9), encoding="utf-8")
-    proc = subprocess.Popen([sys.executable, "-m", "geoback.cli", "validate", str(path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    t0 = time.perf_counter()
-    _, status, usage = os.wait4(proc.pid, 0)
-    seconds = time.perf_counter() - t0
-    err = proc.stderr.read()
-    assert os.waitstatus_to_exitcode(status) == 2, err
-    assert err.startswith(f"error: {path}:1:"), err
-    assert "Traceback" not in err
-    assert seconds < 3.0, seconds  # mostly the interpreter starting
-    assert usage.ru_maxrss < 150_000, f"{usage.ru_maxrss} KB"  # KB on Linux
+    run = run_cli(["validate", path], tmp_path)
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.startswith(f"error: {path}:1:"), run.stderr
+    assert "Traceback" not in run.stderr
+    assert run.seconds < 3.0, run.seconds  # mostly the interpreter starting
+    assert not run.peak_bytes > 150e6, f"{run.peak_bytes / 1e6:.0f} MB"
 
 
 # ---------------------------------------------------------------------------- legitimate YAML

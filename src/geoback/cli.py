@@ -36,7 +36,9 @@ def friendly(func):
             _err(str(exc))
             raise typer.Exit(2) from None
         except KeyboardInterrupt:
-            _err("interrupted; results already written are intact")
+            from .outputs import interrupted_note
+
+            _err(f"interrupted; {interrupted_note()}")
             raise typer.Exit(130) from None
 
     return wrapper
@@ -49,30 +51,57 @@ def _console():
     return Console(stderr=True, soft_wrap=True)
 
 
-def _load(case: Path):
+ALLOW_LARGE_HELP = ("accept a mesh estimated beyond the default limit of 500,000 DOFs (about 2 GB and a "
+                    "minute per solve; GEOBACK_MAX_DOFS changes the limit)")
+
+
+def _allow_large():
+    return typer.Option(False, "--allow-large", help=ALLOW_LARGE_HELP)
+
+
+def _load(case: Path, allow_large: bool = False):
     from .case import load_case
 
-    return load_case(case)
+    return load_case(case, allow_large=allow_large)
+
+
+OUT_HELP = "output folder (default results/<name>); replaced as a whole, so name a folder of its own"
+
+
+def _check_out(out: Optional[str], option: str = "--out", **kwargs) -> Optional[Path]:
+    """--out refused before any work when it cannot take results (a file, '', not writable, ...)."""
+    from .outputs import check_out
+
+    return check_out(out, option, **kwargs)
 
 
 def _out_dir(loaded, out: Optional[Path]) -> Path:
+    """The results folder: --out (checked already), else the case's output.dir, else
+    results/<name> (checked here, before any meshing)."""
     if out is not None:
         return out
     if loaded.case.output.dir:
-        return loaded.folder / loaded.case.output.dir
-    return Path("results") / loaded.case.name
+        return _check_out(str(loaded.folder / loaded.case.output.dir), "output.dir of the case")
+    return _check_out(str(Path("results") / loaded.case.name), "the results folder")
 
 
 @app.command()
 @friendly
-def validate(case: Path = typer.Argument(..., help="case file (YAML)")):
-    """Check a case file: schema, physics and instrument positions."""
-    loaded = _load(case)  # schema errors first: no heavy imports before them
-    from .problem import Problem
+def validate(case: Path = typer.Argument(..., help="case file (YAML)"), allow_large: bool = _allow_large()):
+    """Check a case file: schema, physics, mesh size, instruments, readings and parameters; list every problem."""
+    from .errors import CaseError
 
-    problem = Problem(loaded)
-    typer.echo(f"{case}: valid ({len(loaded.case.instruments)} instruments, {problem.obs.m} readings, "
-               f"{len(loaded.case.parameters)} parameters, {problem.fe.ndof} dofs)")
+    try:
+        loaded = _load(case, allow_large)  # schema errors first: no heavy imports before them
+    except CaseError as exc:
+        if len(exc.problems) > 1:
+            for problem in exc.problems:
+                _err(str(problem))
+            raise typer.Exit(exc.exit_code) from None
+        raise
+    from .validation import check_case
+
+    typer.echo(check_case(loaded))
 
 
 @app.command()
@@ -87,22 +116,26 @@ def schema():
 @app.command()
 @friendly
 def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
-         out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)")):
+         out: Optional[str] = typer.Option(None, help=OUT_HELP),
+         allow_large: bool = _allow_large()):
     """Mesh the case with gmsh; write mesh.msh and mesh.vtu."""
+    out = _check_out(out)
     from .mesh import build_mesh, write_mesh
+    from .outputs import result_set
 
-    loaded = _load(case)
-    m = build_mesh(loaded.case)
+    loaded = _load(case, allow_large)
     folder = _out_dir(loaded, out)
-    write_mesh(m, folder / "mesh.msh")
-    write_mesh(m, folder / "mesh.vtu")
+    m = build_mesh(loaded.case, allow_large=allow_large)
+    with result_set(folder, "mesh") as staging:
+        write_mesh(m, staging / "mesh.msh")
+        write_mesh(m, staging / "mesh.vtu")
     typer.echo(f"{len(m.triangles)} elements, {len(m.nodes)} nodes ({2 * len(m.nodes)} dofs) -> {folder}/mesh.msh, mesh.vtu")
 
 
 @app.command()
 @friendly
 def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
-             out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
+             out: Optional[str] = typer.Option(None, help=OUT_HELP),
              vtu: bool = typer.Option(True, help="write the displacement/stress field as field.vtu"),
              set_: list[str] = typer.Option([], "--set", help="switch on physics: NAME=VALUE, e.g. Egrad[clay]=400, "
                                             "n[clay]=1.5, K0grad=0.05, beta=0.7, B[I1]=0.004, zsplit[clay]=15 with "
@@ -110,12 +143,15 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              refine: float = typer.Option(1.0, help="mesh this many times finer than the case says"),
              noise: bool = typer.Option(False, "--noise", help="add noise drawn from each instrument's C_x"),
              seed: int = typer.Option(0, help="seed of the noise"),
-             readings_out: Optional[Path] = typer.Option(None, help="write the readings as a CSV usable as readings_file")):
+             readings_out: Optional[str] = typer.Option(None, help="write the readings as a CSV usable as readings_file"),
+             allow_large: bool = _allow_large()):
     """Forward run: predicted readings and the field; or study data (--set, --refine, --noise, --readings-out)."""
+    out = _check_out(out)
+    readings_out = _check_out(readings_out, "--readings-out", single_file=True)
     from .problem import Problem
     from .simulate import simulate as run_simulation, synthetic_readings, write_readings_csv
 
-    loaded = _load(case)
+    loaded = _load(case, allow_large)
     values = {}
     for item in set_:
         name, _, value = item.partition("=")
@@ -124,14 +160,16 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
         except ValueError:
             raise GeobackError(f"--set expects NAME=NUMBER, found '{item}'") from None
     if readings_out is not None or noise or refine != 1.0:
+        if readings_out is None:
+            _out_dir(loaded, out)
         readings = synthetic_readings(loaded, refine, values, noise_seed=seed if noise else None)
         target = readings_out or _out_dir(loaded, out) / "readings.csv"
         write_readings_csv(loaded, readings, target)
         typer.echo(f"{sum(len(v) for v in readings.values())} readings (mesh x{refine:g} finer"
                    f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
         return
-    problem = Problem(loaded, parameters=[], extra_values=values)  # readings, if any, are listed too
     folder = _out_dir(loaded, out)
+    problem = Problem(loaded, parameters=[], extra_values=values)  # readings, if any, are listed too
     res = run_simulation(problem, folder, vtu=vtu and loaded.case.output.vtu)
     typer.echo(f"{problem.obs.m} readings predicted on {res['dofs']} dofs -> {folder}/predicted.csv")
 
@@ -139,19 +177,21 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
 @app.command()
 @friendly
 def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
-             out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
+             out: Optional[str] = typer.Option(None, help=OUT_HELP),
              alpha: float = typer.Option(0.05, help="significance level of the adequacy and hypothesis tests"),
              plots: bool = typer.Option(True, help="write the before/after figure"),
-             quiet: bool = typer.Option(False, "--quiet", "-q")):
+             quiet: bool = typer.Option(False, "--quiet", "-q"),
+             allow_large: bool = _allow_large()):
     """Is the model adequate? If not: where is the mismatch, what physics is missing, how much better it fits."""
     from .diagnosis import diagnose as run_diagnosis, diagnosis_text, write_diagnosis
     from .diagnosis.report import verdict
 
-    loaded = _load(case)
+    out = _check_out(out)
+    loaded = _load(case, allow_large)
+    folder = _out_dir(loaded, out)
     console = _console()
     say = None if quiet else (lambda msg: console.print(f"  [dim]{msg}[/]", highlight=False))
     d = run_diagnosis(loaded, alpha=alpha, progress=say)
-    folder = _out_dir(loaded, out)
     write_diagnosis(d, folder, plots=plots)
     if not quiet:
         typer.echo(diagnosis_text(d))
@@ -163,19 +203,21 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
 @app.command()
 @friendly
 def run(case: Path = typer.Argument(..., help="case file (YAML)"),
-        out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
+        out: Optional[str] = typer.Option(None, help=OUT_HELP),
         method: Optional[str] = typer.Option(None, help="lm, lm-scaled or gn (default: the case's fit.method)"),
         plots: bool = typer.Option(False, "--plots", help="also write figures (PNG and SVG)"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="print only the final line"),
-        as_json: bool = typer.Option(False, "--json", help="print summary.json to stdout")):
+        as_json: bool = typer.Option(False, "--json", help="print summary.json to stdout"),
+        allow_large: bool = _allow_large()):
     """Identify the case's parameters by maximum likelihood and write all results."""
     if method is not None and method not in ("lm", "lm-scaled", "gn"):
         raise GeobackError(f"--method must be lm, lm-scaled or gn, not '{method}'")
-    loaded = _load(case)  # schema errors first: no heavy imports before them
+    out = _check_out(out)
+    loaded = _load(case, allow_large)  # schema errors first: no heavy imports before them
+    folder = _out_dir(loaded, out)
     from .identification import run_case
     from .report import report_text, summary
 
-    folder = _out_dir(loaded, out)
     names = [p.name for p in loaded.case.parameters]
 
     console = _console()
@@ -260,15 +302,23 @@ def batch(targets: list[str] = typer.Argument(..., help="folders (every *.yaml i
           workers: Optional[int] = typer.Option(None, help="local worker processes (default min(2, CPUs); unused with --scheduler)"),
           scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address (tcp://host:8786) "
                                                   "instead of local processes"),
-          out: Path = typer.Option(Path("results/batch"), help="output folder: summary.csv and <case name>/")):
+          out: str = typer.Option("results/batch", help="output folder: summary.csv and <case name>/"),
+          allow_large: bool = _allow_large()):
     """Identify many cases in parallel; write summary.csv and each case's results. Exit 1 if any failed."""
+    out = _check_out(out, replaced=False)
     from .batch import failed, run_batch
 
     def progress(row):
         extra = f": {row['message']}" if row["message"] else ""
         typer.echo(f"  {row['case']} ({row['file']}): {row['status']}{extra}", err=True)
 
-    rows = run_batch(targets, out, workers=workers, scheduler=scheduler, progress=progress)
+    try:
+        rows = run_batch(targets, out, workers=workers, scheduler=scheduler, progress=progress,
+                         allow_large=allow_large)
+    except KeyboardInterrupt:
+        _err(f"interrupted; each case's folder in {out} holds its previous or its new complete results; "
+             f"{out / 'summary.csv'} was not updated")
+        raise typer.Exit(130) from None
     bad = failed(rows)
     typer.echo(f"{len(rows) - len(bad)} of {len(rows)} case(s) converged -> {out / 'summary.csv'}")
     if bad:

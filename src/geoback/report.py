@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .outputs import write_atomic, write_csv, write_json, write_matrix_csv
+from .outputs import result_set, write_atomic, write_csv, write_json, write_matrix_csv
 
 
 def reading_label(lab) -> str:
@@ -84,6 +84,12 @@ def report_text(res) -> str:
 
 
 def write_run(res, out: Path, vtu: bool = True, plots: bool = False) -> None:
+    """Every output of a run, replacing the previous run's set in `out` as a whole (outputs.result_set)."""
+    with result_set(out, "run") as staging:
+        _write_run(res, staging, vtu=vtu, plots=plots)
+
+
+def _write_run(res, out: Path, vtu: bool, plots: bool) -> None:
     pr, f, rel = res.problem, res.fit, res.reliability
     params, names = pr.params, pr.params.names
     out = Path(out)

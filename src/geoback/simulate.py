@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from .mesh import write_mesh
-from .outputs import write_csv, write_json
+from .outputs import result_set, write_csv, write_json
 from .problem import Problem
 
 
@@ -52,19 +52,19 @@ def simulate(problem: Problem, out: Path, values: dict | None = None, vtu: bool 
     values = values if values is not None else problem.values
     u = problem.displacement(values)
     x = problem.obs.P @ u
-    out = Path(out)
     measured = problem.obs.measured
     header = READING_HEADER + (["measured"] if measured is not None else [])
     rows = reading_rows(problem, x, measured)
-    write_csv(out / "predicted.csv", header, rows)
-    write_json(out / "predicted.json", {
-        "case": problem.case.name,
-        "values": values,
-        "dofs": problem.fe.ndof,
-        "readings": [dict(zip(header, r)) for r in rows],
-    })
-    if vtu:
-        write_field(problem, values, out / "field.vtu")
+    with result_set(out, "simulate") as staging:  # the previous set replaced as a whole
+        write_csv(staging / "predicted.csv", header, rows)
+        write_json(staging / "predicted.json", {
+            "case": problem.case.name,
+            "values": values,
+            "dofs": problem.fe.ndof,
+            "readings": [dict(zip(header, r)) for r in rows],
+        })
+        if vtu:
+            write_field(problem, values, staging / "field.vtu")
     return {"readings": x, "dofs": problem.fe.ndof}
 
 
@@ -88,9 +88,7 @@ def synthetic_readings(loaded, refine: float = 2.0, values: dict | None = None,
     `values` overrides named quantities (e.g. {'Egrad[clay]': 500}); noise is L z with
     C_x = L L^t per instrument (eqn 10), seeded.
     """
-    from .case import LoadedCase
-
-    fine = LoadedCase(refined_case(loaded.case, refine), loaded.path, loaded.marks)
+    fine = loaded.with_case(refined_case(loaded.case, refine))
     values = dict(values or {})
     constants = {k: values.pop(k) for k in list(values) if k.split("[")[0] in ("A", "B", "C", "D")}
     problem = Problem(fine, parameters=[], extra_values=values, with_readings=False)

@@ -262,7 +262,6 @@ def _compare(s: Scored, J0: float, searched: int) -> None:
 def _split_layer_problem(current, layer: str, z: float, p_hat: np.ndarray, E_below: float):
     """The current model with layer `layer` split at depth z into two meshed layers (conforming
     boundary) and the lower layer's modulus identified."""
-    from ..case import LoadedCase
     from ..problem import Problem
 
     case = current.case
@@ -270,7 +269,7 @@ def _split_layer_problem(current, layer: str, z: float, p_hat: np.ndarray, E_bel
     i = [ly.name for ly in layers].index(layer)
     lower = layers[i].model_copy(update={"name": f"{layer}_below", "top": float(z), "E": float(E_below)})
     ground = case.ground.model_copy(update={"layers": layers[:i + 1] + [lower] + layers[i + 1:]})
-    split = LoadedCase(case.model_copy(update={"ground": ground}), current.loaded.path, current.loaded.marks)
+    split = current.loaded.with_case(case.model_copy(update={"ground": ground}))
     specs = _specs(current, p_hat) + [Parameter(name=f"E[{layer}_below]", initial=float(E_below),
                                                 bounds=(float(E_below) / 50, float(E_below) * 50))]
     extra = {k: v for k, v in current.values.items() if k not in current.ground.baseline()}

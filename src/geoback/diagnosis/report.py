@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..outputs import write_atomic, write_json
+from ..outputs import result_set, write_atomic, write_json
 
 
 def _fit_line(chi2: float, dof: int, p: float) -> str:
@@ -109,10 +109,11 @@ def diagnosis_json(d) -> dict:
 
 
 def write_diagnosis(d, out: Path, plots: bool = True) -> None:
-    out = Path(out)
-    write_atomic(out / "diagnosis.md", diagnosis_text(d))
-    write_json(out / "diagnosis.json", diagnosis_json(d))
-    if plots:
-        from .figure import plot_before_after
+    """diagnosis.md, diagnosis.json (and the figure), replacing the previous set in `out` as a whole."""
+    with result_set(out, "diagnose") as staging:
+        write_atomic(staging / "diagnosis.md", diagnosis_text(d))
+        write_json(staging / "diagnosis.json", diagnosis_json(d))
+        if plots:
+            from .figure import plot_before_after
 
-        plot_before_after(d, out)
+            plot_before_after(d, staging)
