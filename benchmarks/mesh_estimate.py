@@ -1,11 +1,13 @@
 """Mesh-size estimate against real gmsh meshes, and the cost of `validate` and `run` per DOF.
 
 Part 1 (default): for a spread of cases (radius 1-12 m, shallow to deep, narrow to wide
-domains, wall sizes R/4-R/40, far sizes domain/4-domain/60, growth 0.05-1, one to three layers,
+domains, wall sizes R/4-R/60, far sizes domain/4-domain/300, growth 0.08-1, one to three layers,
 with and without refinement along the paper case's instruments, linear and quadratic
 elements) mesh with gmsh (no cache) and compare the number of triangles with
 :func:`geoback.meshsize.estimate`. Prints a table and the ratio's range; exits 1 when a ratio
-falls outside [1/FACTOR, FACTOR].
+falls outside [1/FACTOR, FACTOR]. (A growth above 1 with refinement around instruments is
+over-estimated, by up to 60 % at the schema's maximum 2: gmsh cannot follow so steep a field
+around small refined zones; the estimate errs on the safe side there.)
 
 Part 2 (``--costs``): peak memory (ru_maxrss of a fresh process) and wall time of
 ``geoback validate`` and ``geoback run`` on the paper case meshed ever finer, to fit the
@@ -30,7 +32,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "cases" / "tunnel-paper.yaml"
-FACTOR = 1.25  # stated accuracy of the estimate (tests/test_robust_mesh.py checks a subset)
+FACTOR = 1.15  # stated accuracy of the estimate (tests/test_robust_mesh.py checks a subset)
 
 
 def variants() -> list[tuple[str, dict]]:
@@ -58,6 +60,7 @@ def variants() -> list[tuple[str, dict]]:
     add("fine far", mesh=dict(size_tunnel=0.2, size_far=0.5))
     add("instruments 0.1", mesh=dict(size_tunnel=0.4, size_far=4, size_instruments=0.1))
     add("instruments 0.05 slow", mesh=dict(size_tunnel=0.3, size_far=3, size_instruments=0.05, growth=0.1))
+    add("instruments, growth 1", mesh=dict(size_tunnel=0.05, size_far=3, growth=1.0, size_instruments=0.1))
     add("small tunnel wide", geometry=dict(radius=1.0, axis_depth=6.0, width=60.0, depth=40.0),
         mesh=dict(size_tunnel=0.05, size_far=5), instruments=False)
     add("big tunnel", geometry=dict(radius=12.0, axis_depth=30.0, width=120.0, depth=90.0),
@@ -66,9 +69,9 @@ def variants() -> list[tuple[str, dict]]:
         mesh=dict(size_tunnel=0.2, size_far=2), instruments=False)
     add("three layers", mesh=dict(size_tunnel=0.3, size_far=2.5), layers=[0.0, 6.0, 18.0])
     add("layers P1 fine", mesh=dict(size_tunnel=0.1, size_far=1.0, order=1), layers=[0.0, 4.0, 20.0])
-    add("~100k elements", mesh=dict(size_tunnel=0.05, size_far=0.4))
-    add("~300k elements", mesh=dict(size_tunnel=0.04, size_far=0.22))
-    add("~1M elements", mesh=dict(size_tunnel=0.02, size_far=0.12), instruments=False)
+    add("~19k elements", mesh=dict(size_tunnel=0.05, size_far=0.4))
+    add("~60k elements", mesh=dict(size_tunnel=0.04, size_far=0.22))
+    add("~200k elements", mesh=dict(size_tunnel=0.02, size_far=0.12), instruments=False)
     return out
 
 

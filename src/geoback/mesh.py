@@ -153,7 +153,8 @@ def _read_cached(path: Path, inputs: dict, key: str) -> Mesh | None:
             stored = str(z["checksum"])
         problem = _inconsistency(arrays, stored, inputs)
     except Exception as exc:  # noqa: BLE001 - BadZipFile, EOFError, zlib errors, KeyError, ...: all mean damaged
-        problem = f"unreadable: {type(exc).__name__}{': ' + str(exc) if str(exc) else ''}"
+        text = str(exc).split(". ")[0]
+        problem = f"unreadable: {type(exc).__name__}{': ' + text if text else ''}"
     if problem is None:
         return Mesh(arrays["nodes"], arrays["triangles"], arrays["region"],
                     tuple(arrays["region_names"].tolist()), arrays["tunnel_edges"], key)
