@@ -183,8 +183,6 @@ def _check_folder_contents(folder: Path, where: str) -> None:
     except OSError as exc:
         raise ResultFolderError(f"{where}: cannot read the folder ({exc.strerror or exc})") from None
     for entry in entries:
-        if entry.name.startswith(".") and _TAG in entry.name:
-            continue
         if not entry.is_file(follow_symlinks=False):
             kind = "subfolder" if entry.is_dir(follow_symlinks=False) else "link or special file"
             raise ResultFolderError(f"{where}: expected a results folder (new, or holding only files), found the "
@@ -271,7 +269,7 @@ def _carry_over(folder: Path, staging: Path, kind: str, run_id: str) -> dict:
         previous = _read_manifest(folder / own).get("files", {})
         for entry in os.scandir(folder):
             name = entry.name
-            if name in files or name == own or name in previous or (name.startswith(".") and _TAG in name):
+            if name in files or name == own or name in previous:
                 continue
             if name.startswith(".") and name.endswith(".tmp"):
                 continue  # a temporary file of write_atomic killed midway
