@@ -194,3 +194,18 @@ def test_fast_and_pure_python_parsers_agree(path, monkeypatch):
     fast = outcome()
     monkeypatch.setattr(yamlmarks, "_CLoader", None)
     assert outcome() == fast
+
+
+ODD = ["\t", "a: 1\n---\nb: 2\n", "a: &x 1\nb: *y\n", "%YAML 1.1\n%YAML 1.1\n---\na: 1\n", "@a: 1", "a: \x00",
+       "x:\n  y: 1\n  z: \x07\n", "a: !!timestamp x\n", "a: !!int x\n", "a: !!float x\n", "!!timestamp x: 1\n",
+       "a: !!pairs 3\n", "a: !!bool maybe\n", "a: !!merge x\n", "<<: 1\n", "a: !!value x\n", "x:\n  y: &z 1\n  w: *q\n",
+       "a: !!python/name:os.system\n", "a: 2001-13-45\n", "? [1]\n: 2\n", "a: |\n  x\n b: 1", "{", "", "a: `x`"]
+
+
+@pytest.mark.parametrize("text", ODD, ids=[repr(t)[:24] for t in ODD])
+def test_odd_yaml_gets_a_located_message_with_a_field(text):
+    """Syntax, composer and constructor errors (pyyaml raises plain AttributeError/ValueError for
+    some tagged values) all end as 'file:line:column: field: ...'."""
+    with pytest.raises(CaseError) as info:
+        parse_yaml_with_marks(text, "odd.yaml")
+    assert re.match(r"^odd\.yaml:\d+:\d+: [^:]+: ", str(info.value)), str(info.value)

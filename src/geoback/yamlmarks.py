@@ -224,6 +224,14 @@ def _construct(node, at: Path_, marks, loader, file, mark, active: set, budget: 
     except yaml.YAMLError as exc:
         raise CaseError(f"invalid YAML value: {getattr(exc, 'problem', None) or exc}", file=file,
                         line=mark[0], column=mark[1], field=format_path(at)) from None
+    except Exception:  # noqa: BLE001 - pyyaml's constructors raise plain errors on some tagged values
+        raise CaseError(_bad_tagged(node), file=file, line=mark[0], column=mark[1], field=format_path(at)) from None
+
+
+def _bad_tagged(node) -> str:
+    tag = str(node.tag).rsplit(":", 1)[-1]
+    return (f"invalid YAML value: expected a valid {printable(tag)} (as YAML reads this value), found "
+            f"{printable(repr(node.value))[:60]} (put it in quotes to keep it as text)")
 
 
 _MERGE = "tag:yaml.org,2002:merge"
@@ -240,6 +248,9 @@ def _key(key_node, at: Path_, loader, file) -> Any:
     except yaml.YAMLError as exc:
         raise CaseError(f"invalid YAML key: {getattr(exc, 'problem', None) or exc}", file=file,
                         line=key_mark[0], column=key_mark[1], field=format_path(at)) from None
+    except Exception:  # noqa: BLE001 - as for values
+        raise CaseError(_bad_tagged(key_node).replace("value", "key", 1), file=file, line=key_mark[0],
+                        column=key_mark[1], field=format_path(at)) from None
     if not isinstance(key, str):
         key = key_node.value  # `null:`, `yes:`, `1:` are names here, as written
     return key
@@ -316,8 +327,15 @@ def _syntax_error(text: str, exc: yaml.YAMLError, file: str | None) -> CaseError
         column = exc.position - (text.rfind("\n", 0, exc.position) + 1) + 1
         char = exc.character
         code = f"#x{char:04x}" if isinstance(char, int) else (f"#x{ord(char):04x}" if isinstance(char, str) and len(char) == 1 else "?")
+        try:  # the path of a value standing where the character is
+            from types import SimpleNamespace
+
+            field = _path_at_error(text[:exc.position] + "x", None, False,
+                                   stop=SimpleNamespace(line=line - 1, column=column - 1))
+        except Exception:  # noqa: BLE001 - the field is a courtesy
+            field = None
         return CaseError(f"invalid YAML: expected printable text, found the control character {code}",
-                         file=file, line=line, column=column)
+                         file=file, line=line, column=column, field=format_path(field or ()))
     problem = (getattr(exc, "problem", None) or "").strip()
     context = (getattr(exc, "context", None) or "").strip()
     pmark, cmark = getattr(exc, "problem_mark", None), getattr(exc, "context_mark", None)
@@ -355,10 +373,13 @@ def _syntax_error(text: str, exc: yaml.YAMLError, file: str | None) -> CaseError
         if context and cmark is not None and mark is not cmark:
             message += f" ({context} on line {cmark.line + 1})"
     field = _path_at_error(text, mark, use_context)
+    if field is None and mark is not None:  # e.g. the composer's errors: the path of what stands there
+        field = _path_at_error(text, None, False, stop=mark)
+    field = field if field is not None else ()  # nothing open yet: the file as a whole
     return CaseError(f"invalid YAML: {message}", file=file,
                      line=mark.line + 1 if mark is not None else None,
                      column=mark.column + 1 if mark is not None else None,
-                     field=format_path(field) if field is not None else None)
+                     field=format_path(field))
 
 
 def _path_at_error(text: str, mark, use_context: bool, stop=None, loader=yaml.SafeLoader) -> Path_ | None:
@@ -425,13 +446,17 @@ def printable(text: Any) -> str:
 
 
 def format_path(at: Path_) -> str:
-    """('instruments', 0, 'radius') -> 'instruments[0].radius'."""
+    """('instruments', 0, 'radius') -> 'instruments[0].radius'; a key that could be misread in
+    the path (containing ':', '.', brackets, quotes or spaces, or empty) is put in double quotes."""
     text = ""
     for part in at:
         if isinstance(part, int) and not isinstance(part, bool):
             text += f"[{part}]"
         else:
-            text += ("." if text else "") + printable(part)
+            key = printable(part)
+            if not key or any(c in key for c in ':.[]" ') or key != key.strip():
+                key = '"' + key.replace('"', '\\"') + '"'
+            text += ("." if text else "") + key
     return text or "(top level)"
 
 
