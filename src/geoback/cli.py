@@ -51,8 +51,8 @@ def _console():
     return Console(stderr=True, soft_wrap=True)
 
 
-ALLOW_LARGE_HELP = ("accept a mesh estimated beyond the default limit of 500,000 DOFs (about 2 GB and a "
-                    "minute per solve; GEOBACK_MAX_DOFS changes the limit)")
+ALLOW_LARGE_HELP = ("accept a mesh estimated beyond the default limit of 500,000 DOFs (about 1.8 GB and a "
+                    "minute for `run`; GEOBACK_MAX_DOFS changes the limit)")
 
 
 def _allow_large():
@@ -65,7 +65,8 @@ def _load(case: Path, allow_large: bool = False):
     return load_case(case, allow_large=allow_large)
 
 
-OUT_HELP = "output folder (default results/<name>); replaced as a whole, so name a folder of its own"
+OUT_HELP = ("output folder (default results/<name>); this command's previous results there are replaced "
+            "as a whole, other files kept")
 
 
 def _check_out(out: Optional[str], option: str = "--out", **kwargs) -> Optional[Path]:
