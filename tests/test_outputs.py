@@ -105,9 +105,9 @@ class Interrupted(Exception):
 
 def test_interrupted_run_leaves_old_or_new_set(tmp_path, cache, monkeypatch):
     """Fail the n-th file-system step of writing a run into a folder holding an older run's results
-    (each write of a file, each link of a carried-over file, the swap), for every n: afterwards the
-    folder holds exactly the old set or, once the swap is done, exactly the new one; every file
-    parses, and no temporary file or folder is left behind."""
+    (each write of a file, each link of a carried-over file, each rename, the swap), for every n:
+    afterwards the folder holds exactly the old set or, once the swap is done, exactly the new one;
+    every file parses, and no temporary file or folder is left behind."""
     weighting = yaml.safe_load(PAPER.read_text()).get("fit", {}).get("weighting", "full")
     old_case = case_variant(tmp_path, "old.yaml", max_iterations=2,  # an older run that differs in every file
                             weighting="full" if weighting == "identity" else "identity")
@@ -122,8 +122,8 @@ def test_interrupted_run_leaves_old_or_new_set(tmp_path, cache, monkeypatch):
     for name in names:
         assert not _same(old / name, new / name), f"{name}: old and new runs must differ for this test"
 
-    real = {"replace": os.replace, "link": os.link, "swap": geoback.outputs._swap}
-    state = {"left": -1, "steps": 0}
+    real = {"replace": os.replace, "link": os.link, "rename": os.rename, "swap": geoback.outputs._swap}
+    state = {"left": -1, "steps": 0, "swapped": False}
 
     def step():
         state["steps"] += 1
@@ -134,11 +134,13 @@ def test_interrupted_run_leaves_old_or_new_set(tmp_path, cache, monkeypatch):
     def failing(name):
         def wrapper(*args, **kwargs):
             step()
-            return real[name](*args, **kwargs)
+            result = real[name](*args, **kwargs)
+            state["swapped"] |= name == "swap"
+            return result
         return wrapper
 
-    monkeypatch.setattr(geoback.outputs.os, "replace", failing("replace"))
-    monkeypatch.setattr(geoback.outputs.os, "link", failing("link"))
+    for name in ("replace", "link", "rename"):
+        monkeypatch.setattr(geoback.outputs.os, name, failing(name))
     monkeypatch.setattr(geoback.outputs, "_swap", failing("swap"))
     out = tmp_path / "probe"
     shutil.copytree(old, out)
@@ -149,25 +151,24 @@ def test_interrupted_run_leaves_old_or_new_set(tmp_path, cache, monkeypatch):
     for n in range(total + 1):
         out = tmp_path / f"run{n}"
         shutil.copytree(old, out)
-        state.update(left=n, steps=0)
+        state.update(left=n, steps=0, swapped=False)
         result.problem.counters = copy.copy(counters)
-        if n < total:
-            with pytest.raises(Interrupted):
-                write_run(result, out)
-        else:
+        try:
             write_run(result, out)
+        except Interrupted:
+            assert n < total
+        swapped = state["swapped"]  # the new set is in place once the swap is done, not before
         present = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
         assert present == sorted(names + ["notes.txt"]), f"after {n} steps: files {present}"
         assert (out / "notes.txt").read_text() == "the user's own notes\n"
-        reference = old if n < total else new
+        reference = new if swapped else old
         for name in names:
             _parse(out / name)
             assert _same(out / name, reference / name), \
-                f"after {n} of {total} steps: {name} is not the {'old' if n < total else 'new'} version"
+                f"after {n} of {total} steps: {name} is not the {'new' if swapped else 'old'} version"
         leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(f".run{n}")]
         assert not leftovers, f"after {n} steps: left behind {leftovers}"
-        if n == total:
-            assert geoback.outputs.check_result_set(out, "run") == []
+        assert geoback.outputs.check_result_set(out, "run") == [] or not swapped
     monkeypatch.undo()
 
 

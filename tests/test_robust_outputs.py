@@ -178,13 +178,14 @@ def test_leftovers_of_killed_writers_are_removed(tmp_path):
     dead = _dead_pid()
     stale_new = out.parent / f".results.geoback-{outputs._HOST}-{dead}-0badc0de.new"
     stale_old = out.parent / f".results.geoback-{outputs._HOST}-{dead}-0badc0df.old"
+    stale_ready = out.parent / f".results.geoback-{outputs._HOST}-{dead}-0badc0e1.ready"
     live = out.parent / f".results.geoback-{outputs._HOST}-{os.getppid()}-0badc0e0.new"  # a writer still running
-    for folder in (stale_new, stale_old, live):
+    for folder in (stale_new, stale_old, stale_ready, live):
         folder.mkdir()
         (folder / "half.csv").write_text("half")
     with result_set(out, "run") as staging:
         _write(staging, {"a.csv": "2\n"})
-    assert not stale_new.exists() and not stale_old.exists() and live.exists()
+    assert not stale_new.exists() and not stale_old.exists() and not stale_ready.exists() and live.exists()
     assert _visible(out) == {"a.csv": "2\n"}
 
 
@@ -202,7 +203,7 @@ def test_two_rename_fallback_and_its_recovery(tmp_path, monkeypatch, left):
     # simulate a kill between the renames: the folder retired, the complete staging not yet in place
     dead = _dead_pid()
     prefix = f".results.geoback-{outputs._HOST}-{dead}-deadbeef"
-    retired, staged = out.parent / f"{prefix}.old", out.parent / f"{prefix}.new"
+    retired, staged = out.parent / f"{prefix}.old", out.parent / f"{prefix}.ready"
     shutil.copytree(out, staged)
     (staged / "a.csv").write_text("3\n")
     manifest = json.loads((staged / ".geoback-run.json").read_text())

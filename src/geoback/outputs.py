@@ -110,7 +110,7 @@ def write_matrix_csv(path: Path, labels: list[str], matrix: np.ndarray) -> None:
 
 # ---------------------------------------------------------------------------- result sets
 MANIFEST = ".geoback-{kind}.json"  # inside a results folder: the files of that kind's set, with checksums
-_TAG = ".geoback-"  # staging and retired folders: .<name>.geoback-<host>-<pid>-<token>.new|.old
+_TAG = ".geoback-"  # staging, complete and retired folders: .<name>.geoback-<host>-<pid>-<token>.new|.ready|.old
 _HOST = "".join(c if c.isalnum() or c in "-_" else "_" for c in socket.gethostname())[:40] or "host"
 _LOCK = threading.Lock()
 _SETS: dict[str, list[str]] = {"open": [], "done": [], "abandoned": []}  # folders, for interrupted_note()
@@ -225,15 +225,19 @@ def result_set(folder: str | os.PathLike, kind: str, run_id: str | None = None) 
     key = str(folder)
     with _LOCK:
         _SETS["open"].append(key)
+    ready = staging.with_suffix(".ready")  # the complete set, named so before it is swapped in
+    retired = staging.with_suffix(".old")
     try:
         yield staging
-        manifest = _carry_over(folder, staging, kind, run_id or uuid.uuid4().hex[:16])
+        _carry_over(folder, staging, kind, run_id or uuid.uuid4().hex[:16])
         with _deferred_interrupt():
-            _swap(folder, staging)
+            os.rename(staging, ready)
+            _swap(folder, ready)
+            with contextlib.suppress(OSError):  # housekeeping: `ready` now holds the previous folder
+                os.rename(ready, retired)
             with _LOCK:
                 _SETS["open"].remove(key)
                 _SETS["done"].append(key)
-        del manifest
     except BaseException:
         with _LOCK:
             if key in _SETS["open"]:
@@ -241,7 +245,8 @@ def result_set(folder: str | os.PathLike, kind: str, run_id: str | None = None) 
                 _SETS["abandoned"].append(key)
         raise
     finally:
-        _remove_tree(staging)  # after a swap it holds the previous folder
+        for leftover in (staging, ready, retired):
+            _remove_tree(leftover)
 
 
 def _sha256(path: Path) -> str:
@@ -340,22 +345,22 @@ def _exchange(a: Path, b: Path) -> bool:
     raise OSError(err, os.strerror(err), str(b))
 
 
-def _swap(folder: Path, staging: Path) -> None:
-    """Put staging's content at `folder`; afterwards `staging` holds the previous folder (if any)."""
+def _swap(folder: Path, ready: Path) -> None:
+    """Put ready's content at `folder`; afterwards `ready` holds the previous folder (if any)."""
     try:
-        os.rename(staging, folder)  # no folder yet: one atomic rename
-        staging.mkdir()  # (an empty previous folder, for the caller to remove)
+        os.rename(ready, folder)  # no folder yet: one atomic rename
+        ready.mkdir()  # (an empty previous folder, for the caller to remove)
         return
     except OSError as exc:
         if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR, errno.ENOTDIR):
             raise
-    if _exchange(staging, folder):
+    if _exchange(ready, folder):
         return
     # two renames: the folder is briefly absent; _recover() finishes the job if killed in between
-    retired = staging.with_name(staging.name[:-len(".new")] + ".old")
+    retired = ready.with_suffix(".old")
     os.rename(folder, retired)
-    os.rename(staging, folder)
-    os.rename(retired, staging)
+    os.rename(ready, folder)
+    os.rename(retired, ready)
 
 
 @contextlib.contextmanager
@@ -382,21 +387,21 @@ def _leftovers(folder: Path) -> list[tuple[Path, str, bool]]:
         return out
     for entry in entries:
         name = entry.name
-        if not name.startswith(prefix) or not name.endswith((".new", ".old")):
+        if not name.startswith(prefix) or not name.endswith((".new", ".ready", ".old")):
             continue
-        host, _, rest = name[len(prefix):].rpartition("-")[0].rpartition("-")
+        host, _, rest = name[len(prefix):].rsplit(".", 1)[0].rpartition("-")[0].rpartition("-")
         try:
             pid = int(rest)
         except ValueError:
             continue
-        if host == _HOST:
+        if host == _HOST and os.name == "posix":
             gone = pid != os.getpid() and not _alive(pid)
-        else:  # another machine on a shared file system: trust age only
+        else:  # another machine on a shared file system (or no cheap liveness test): trust age only
             try:
                 gone = time.time() - entry.stat(follow_symlinks=False).st_mtime > 86400
             except OSError:
                 gone = False
-        out.append((Path(entry.path), name[-3:], gone))
+        out.append((Path(entry.path), name.rsplit(".", 1)[1], gone))
     return out
 
 
@@ -411,15 +416,14 @@ def _alive(pid: int) -> bool:
 
 
 def _recover(folder: Path) -> None:
-    """Clean up after processes killed while writing next to `folder`: a missing folder is put
-    back from a complete staging folder (its manifest is written last) or from the retired one;
-    everything else left over is removed."""
+    """Clean up after processes killed while writing next to `folder`: a missing folder (killed
+    between the two renames of the fallback swap) is put back from the complete set (``.ready``)
+    or else the retired one (``.old``); everything else left over is removed."""
     leftovers = [(p, k) for p, k, gone in _leftovers(folder) if gone]
     if not leftovers:
         return
     if not folder.exists():
-        complete = [p for p, k in leftovers if k == "new" and any(q.name.startswith(".geoback-") and q.suffix == ".json"
-                                                                  for q in p.iterdir())]
+        complete = [p for p, k in leftovers if k == "ready"]
         retired = [p for p, k in leftovers if k == "old"]
         for candidate in complete + retired:
             try:
