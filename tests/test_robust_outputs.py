@@ -71,15 +71,22 @@ def test_bad_out_refused_before_any_work(command, tmp_path, env):
     assert sorted(p.name for p in work.iterdir()) == []
 
 
-@pytest.mark.skipif(os.geteuid() == 0 if hasattr(os, "geteuid") else True, reason="root may write anywhere")
 def test_unwritable_out_refused(tmp_path, env):
+    """A folder without write permission (or, for root, a file system that takes no folders)."""
     locked = tmp_path / "locked"
     locked.mkdir()
     locked.chmod(0o555)
+    places = [locked / "out"]
+    if Path("/proc").is_dir():
+        places.append(Path("/proc") / "geoback-out")
     try:
-        proc = run_cli(["run", PAPER, "--out", locked / "out"], tmp_path, env=env)
-        assert proc.returncode == 2 and "not writable" in proc.stderr, proc.stderr
-        assert not (tmp_path / "cache").exists()
+        for k, place in enumerate(places):
+            cache = tmp_path / f"cache{k}"
+            proc = run_cli(["run", PAPER, "-q", "--out", place], tmp_path, env=dict(env, GEOBACK_CACHE=str(cache)))
+            if place.parent == locked and getattr(os, "geteuid", lambda: 1)() == 0:
+                continue  # root may write anywhere
+            assert proc.returncode == 2 and "not writable" in proc.stderr, proc.stderr
+            assert not cache.exists()
     finally:
         locked.chmod(0o755)
 
@@ -154,6 +161,19 @@ def test_result_set_exception_leaves_the_folder_untouched(tmp_path):
         assert _visible(out) == before and out.stat().st_ino == inode
         assert _siblings(out) == []
     assert "still holds its previous results" in outputs.interrupted_note()
+
+
+def test_linked_results_folder_keeps_its_link(tmp_path):
+    target = tmp_path / "disk" / "results"
+    target.mkdir(parents=True)
+    link = tmp_path / "results"
+    link.symlink_to(target)
+    for k in range(2):
+        with result_set(link, "run") as staging:
+            _write(staging, {"a.csv": f"{k}\n"})
+        assert link.is_symlink() and _visible(link) == {"a.csv": f"{k}\n"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["disk", "results"]
+    assert _siblings(target) == []
 
 
 def test_result_set_refuses_a_folder_with_subfolders(tmp_path):

@@ -143,7 +143,9 @@ def check_out(value: str | os.PathLike | None, option: str = "--out", single_fil
             raise ResultFolderError(f"{where}: expected a file name, found an existing folder")
         _check_creatable(path.parent, where)
         return path
-    if path.exists() or path.is_symlink():
+    if path.is_symlink() and not path.exists():
+        raise ResultFolderError(f"{where}: expected a folder for the results, found a link to nothing")
+    if path.exists():
         if not path.is_dir():
             raise ResultFolderError(f"{where}: expected a folder for the results, found an existing file")
         here = Path.cwd().resolve()
@@ -175,6 +177,11 @@ def _check_creatable(parent: Path, where: str) -> None:
         raise ResultFolderError(f"{where}: expected a folder to write into, found the file {probe} in the way")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise ResultFolderError(f"{where}: expected a place geoback can write, found {probe} not writable")
+    try:  # permissions are not the whole story (read-only mounts, ACLs, special file systems): try
+        os.rmdir(tempfile.mkdtemp(prefix=".geoback-probe-", dir=probe))
+    except OSError as exc:
+        raise ResultFolderError(f"{where}: expected a place geoback can write, found {probe} not writable "
+                                f"({exc.strerror or exc})") from None
 
 
 def _check_folder_contents(folder: Path, where: str) -> None:
@@ -210,8 +217,8 @@ def result_set(folder: str | os.PathLike, kind: str, run_id: str | None = None) 
     manifest (default: a new random id).
     """
     folder = Path(folder)
-    if not folder.name or folder.name in (".", ".."):
-        folder = Path(os.path.abspath(folder))
+    if not folder.name or folder.name in (".", "..") or folder.is_symlink():
+        folder = folder.resolve()  # a linked results folder: its target is replaced, the link kept
     parent = folder.parent
     parent.mkdir(parents=True, exist_ok=True)
     _recover(folder)
