@@ -1,4 +1,4 @@
-"""Result files of `geoback run`: reproducible byte for byte, written atomically, always written."""
+"""Result files of `geoback run`: reproducible byte for byte, replaced as a whole set, always written."""
 from __future__ import annotations
 
 import csv
@@ -104,50 +104,71 @@ class Interrupted(Exception):
     pass
 
 
-def test_interrupted_run_leaves_old_or_new_files(tmp_path, cache, monkeypatch):
-    """Fail the n-th rename of a run into a folder holding an older run's results, for every n:
-    each file is afterwards either completely the old or completely the new version, every file
-    parses, and no temporary file is left behind."""
+def test_interrupted_run_leaves_old_or_new_set(tmp_path, cache, monkeypatch):
+    """Fail the n-th file-system step of writing a run into a folder holding an older run's results
+    (each write of a file, each link of a carried-over file, each rename, the swap), for every n:
+    afterwards the folder holds exactly the old set or, once the swap is done, exactly the new one;
+    every file parses, and no temporary file or folder is left behind."""
     weighting = yaml.safe_load(PAPER.read_text()).get("fit", {}).get("weighting", "full")
     old_case = case_variant(tmp_path, "old.yaml", max_iterations=2,  # an older run that differs in every file
                             weighting="full" if weighting == "identity" else "identity")
     old, new = tmp_path / "old", tmp_path / "new"
     run_case(load_case(old_case), old)
+    (old / "notes.txt").write_text("the user's own notes\n")  # not geoback's: carried over
     analysis = prepare(load_case(PAPER))
     result = identify(analysis)  # identified once; written again for every n below
     exploration = explore(analysis.misfit, result, ("field",))  # writing reads it and runs no model
     write_run(result, new, exploration)
-    names = sorted(p.name for p in new.iterdir())
-    assert sorted(p.name for p in old.iterdir()) == names
+    names = sorted(p.name for p in new.iterdir() if not p.name.startswith("."))
+    assert sorted(p.name for p in old.iterdir() if not p.name.startswith(".")) == sorted(names + ["notes.txt"])
     for name in names:
         assert not _same(old / name, new / name), f"{name}: old and new runs must differ for this test"
 
-    real_replace = os.replace
-    state = {}
+    real = {"replace": os.replace, "link": os.link, "rename": os.rename, "swap": geoback.outputs._swap}
+    state = {"left": -1, "steps": 0, "swapped": False}
 
-    def failing_replace(src, dst, *args, **kwargs):
-        if Path(dst).parent == state["out"]:
-            if state["left"] == 0:
-                raise Interrupted(f"killed before renaming onto {Path(dst).name}")
-            state["left"] -= 1
-        return real_replace(src, dst, *args, **kwargs)
+    def step():
+        state["steps"] += 1
+        if state["left"] == 0:
+            raise Interrupted("killed")
+        state["left"] -= 1
 
-    monkeypatch.setattr(geoback.outputs.os, "replace", failing_replace)
-    for n in range(len(names)):
+    def failing(name):
+        def wrapper(*args, **kwargs):
+            step()
+            result = real[name](*args, **kwargs)
+            state["swapped"] |= name == "swap"
+            return result
+        return wrapper
+
+    for name in ("replace", "link", "rename"):
+        monkeypatch.setattr(geoback.outputs.os, name, failing(name))
+    monkeypatch.setattr(geoback.outputs, "_swap", failing("swap"))
+    out = tmp_path / "probe"
+    shutil.copytree(old, out)
+    write_run(result, out, exploration)  # count the steps of a whole write
+    total = state["steps"]
+    assert total > len(names)
+    for n in range(total + 1):
         out = tmp_path / f"run{n}"
         shutil.copytree(old, out)
-        state.update(out=out, left=n)
-        with pytest.raises(Interrupted):
+        state.update(left=n, steps=0, swapped=False)
+        try:
             write_run(result, out, exploration)
-        present = sorted(p.name for p in out.iterdir())
-        assert present == names, f"after {n} renames: unexpected files {sorted(set(present) - set(names))}"
-        renewed = 0
+        except Interrupted:
+            assert n < total
+        swapped = state["swapped"]  # the new set is in place once the swap is done, not before
+        present = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
+        assert present == sorted(names + ["notes.txt"]), f"after {n} steps: files {present}"
+        assert (out / "notes.txt").read_text() == "the user's own notes\n"
+        reference = new if swapped else old
         for name in names:
             _parse(out / name)
-            is_new, is_old = _same(out / name, new / name), _same(out / name, old / name)
-            assert is_new or is_old, f"after {n} renames: {name} is neither the old nor the new version"
-            renewed += is_new and not is_old
-        assert renewed == n, f"after {n} renames {renewed} files are new"
+            assert _same(out / name, reference / name), \
+                f"after {n} of {total} steps: {name} is not the {'new' if swapped else 'old'} version"
+        leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(f".run{n}")]
+        assert not leftovers, f"after {n} steps: left behind {leftovers}"
+        assert geoback.outputs.check_result_set(out, "run") == [] or not swapped
     monkeypatch.undo()
 
 

@@ -101,12 +101,12 @@ def _safe(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_\-.]+", "_", text).strip("._") or "case"
 
 
-def case_name_of(path: Path) -> str:
+def case_name_of(path: Path, allow_large: bool = False) -> str:
     """The case's `name` when it loads, else the file stem (the worker reports the error)."""
     try:
         from .case import load_case
 
-        return load_case(path).case.name
+        return load_case(path, allow_large=allow_large).case.name
     except Exception:  # noqa: BLE001 - a broken case is reported by its worker
         return _safe(path.stem)
 
@@ -127,11 +127,12 @@ def output_folders(paths: list[Path], names: list[str]) -> list[str]:
     return folders
 
 
-def run_one(path: str, out_dir: str, name: str | None = None, in_worker: bool = True) -> dict:
+def run_one(path: str, out_dir: str, name: str | None = None, in_worker: bool = True,
+            allow_large: bool = False) -> dict:
     """Identify one case and write its outputs to out_dir; never raises (picklable, top level).
 
     In a worker process (`in_worker`) it limits BLAS/OpenMP threads to one; run in the
-    calling process it leaves the environment alone.
+    calling process it leaves the environment alone. `allow_large`: as `load_case`'s.
     """
     if in_worker:
         limit_threads()
@@ -146,7 +147,7 @@ def run_one(path: str, out_dir: str, name: str | None = None, in_worker: bool = 
         from .case import load_case
         from .run import run_case
 
-        loaded = load_case(path)
+        loaded = load_case(path, allow_large=allow_large)
         row["case"] = loaded.case.name
         if threadpool_limits is not None and in_worker:
             with threadpool_limits(limits=1):
@@ -170,16 +171,16 @@ def _error_row(path: str, name: str, out_dir: str, exc: BaseException) -> dict:
             "seconds": None, "message": _one_line(exc), "out": out_dir}
 
 
-def _run_pool(jobs: list[tuple[str, str, str]], workers: int, report) -> list[dict]:
+def _run_pool(jobs: list[tuple], workers: int, report) -> list[dict]:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     rows = []
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=limit_threads) as pool:
-        futures = {pool.submit(run_one, *job): job for job in jobs}
+        futures = {pool.submit(run_one, *job[:3], True, job[3]): job for job in jobs}
         for fut in as_completed(futures):
-            path, out_dir, name = futures[fut]
+            path, out_dir, name, _ = futures[fut]
             try:
                 row = fut.result()
             except Exception as exc:  # noqa: BLE001 - e.g. a worker killed by the OS
@@ -189,7 +190,7 @@ def _run_pool(jobs: list[tuple[str, str, str]], workers: int, report) -> list[di
     return rows
 
 
-def _run_dask(jobs: list[tuple[str, str, str]], scheduler: str, report) -> list[dict]:
+def _run_dask(jobs: list[tuple], scheduler: str, report) -> list[dict]:
     try:
         from dask.distributed import Client, as_completed
     except ImportError:
@@ -201,9 +202,9 @@ def _run_dask(jobs: list[tuple[str, str, str]], scheduler: str, report) -> list[
     rows = []
     try:
         # pure=False: a fresh random key per task, so two batches sharing a cluster never merge
-        futures = {client.submit(run_one, *job, pure=False): job for job in jobs}
+        futures = {client.submit(run_one, *job[:3], True, job[3], pure=False): job for job in jobs}
         for fut in as_completed(list(futures)):
-            path, out_dir, name = futures[fut]
+            path, out_dir, name, _ = futures[fut]
             try:
                 row = fut.result()
             except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker
@@ -230,8 +231,10 @@ def summary_table(rows: list[dict]) -> tuple[list[str], list[list]]:
 
 
 def run_batch(paths: Iterable[str | Path], out: str | Path, workers: int | None = 2,
-              scheduler: Optional[str] = None, progress: Optional[Callable[[dict], None]] = None) -> list[dict]:
+              scheduler: Optional[str] = None, progress: Optional[Callable[[dict], None]] = None,
+              allow_large: bool = False) -> list[dict]:
     """Run every case named by `paths` (folders, globs, files); write out/summary.csv.
+    `allow_large`: mesh cases beyond the default size limit (as `load_case`'s).
 
     Returns the rows sorted by case file: dicts with case, file, status, parameters
     {name: estimate}, reduced_chi2, seconds, message and out (the case's results folder).
@@ -245,16 +248,16 @@ def run_batch(paths: Iterable[str | Path], out: str | Path, workers: int | None 
         raise GeobackError(f"--workers must be at least 1, not {workers}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    names = [case_name_of(p) for p in files]
+    names = [case_name_of(p, allow_large) for p in files]
     folders = output_folders(files, names)
-    jobs = [(str(p), str(out / f), n) for p, f, n in zip(files, folders, names)]
+    jobs = [(str(p), str(out / f), n, allow_large) for p, f, n in zip(files, folders, names)]
     report = progress or (lambda row: None)
     if scheduler:
         rows = _run_dask(jobs, scheduler, report)
     elif workers == 1 or len(jobs) == 1:
         rows = []
         for job in jobs:
-            rows.append(run_one(*job, in_worker=False))
+            rows.append(run_one(*job[:3], in_worker=False, allow_large=job[3]))
             report(rows[-1])
     else:
         rows = _run_pool(jobs, min(workers, len(jobs)), report)

@@ -13,7 +13,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from .case_checks import physical_problems
-from .case_messages import _clean_loc, _more, _pick
+from .case_messages import _clean_loc, _described, _more
 from .case_schema import (Case, Convergence, Deflectometer, FitSettings, Geometry, Ground,  # noqa: F401 (re-exported)
                           Inclinometer, Instrument, Layer, MeshSettings, Output, Parameter, PointsInstrument,
                           Prior, SlidingMicrometer, _show)
@@ -21,8 +21,11 @@ from .errors import CaseError
 from .yamlmarks import format_path, load_yaml_with_marks, locate
 
 
-def case_from_data(data: Any, marks: dict | None = None, file: str | None = None) -> Case:
-    """Validate already-parsed data; raise CaseError located in the file."""
+def case_from_data(data: Any, marks: dict | None = None, file: str | None = None,
+                   allow_large: bool = False) -> Case:
+    """Validate already-parsed data; raise CaseError located in the file, carrying every problem
+    found (``CaseError.problems``). A mesh estimated beyond the default size limit is one of the
+    problems unless `allow_large`."""
     marks = marks or {}
     if not isinstance(data, dict):
         line, col = marks.get((), (1, 1))
@@ -32,28 +35,41 @@ def case_from_data(data: Any, marks: dict | None = None, file: str | None = None
         case = Case.model_validate(data)
     except ValidationError as exc:
         try:
-            at, message, more = _pick(exc.errors(), data, marks)
+            problems = _described(exc.errors(), data, marks)
         except Exception:  # pragma: no cover - the plain pydantic wording is better than a crash
-            err = exc.errors()[0]
-            at = _clean_loc(tuple(err["loc"]), data)
-            message, more = err["msg"].replace("Input should be", "expected"), len(exc.errors()) - 1
-        line, col = locate(at, marks)
-        raise CaseError(message + _more(more), file=file, line=line, column=col,
-                        field=format_path(at)) from None
-    problems = physical_problems(case)
+            problems = [(_clean_loc(tuple(err["loc"]), data), err["msg"].replace("Input should be", "expected"))
+                        for err in exc.errors()]
+        raise located_problems(problems, marks, file) from None
+    problems = physical_problems(case, allow_large=allow_large)
     if problems:
-        at, message = problems[0]
-        line, col = locate(at, marks)
-        raise CaseError(message + _more(len(problems) - 1), file=file, line=line, column=col,
-                        field=format_path(at))
+        raise located_problems(problems, marks, file)
     return case
+
+
+def located_problems(problems: list[tuple[tuple, str]], marks: dict, file: str | None) -> CaseError:
+    """One CaseError for a list of (path, message): the first, '(and N more problems)', and all of
+    them in ``.problems``."""
+    located = []
+    for at, message in problems:
+        line, col = locate(at, marks)
+        located.append(CaseError(message, file=file, line=line, column=col, field=format_path(at)))
+    first = located[0]
+    if len(located) == 1:
+        return first
+    return CaseError(first.reason + _more(len(located) - 1), file=file, line=first.line, column=first.column,
+                     field=first.field, problems=located)
 
 
 class LoadedCase:
     """A validated case together with where it came from (for readings files and messages)."""
 
-    def __init__(self, case: Case, path: Path | None, marks: dict):
+    def __init__(self, case: Case, path: Path | None, marks: dict, allow_large: bool = False):
         self.case, self.path, self.marks = case, path, marks
+        self.allow_large = allow_large  # meshes beyond the default size limit allowed (--allow-large)
+
+    def with_case(self, case: Case) -> "LoadedCase":
+        """The same origin (file, marks, allow_large) for a changed case (a finer mesh, a split layer)."""
+        return LoadedCase(case, self.path, self.marks, allow_large=self.allow_large)
 
     @property
     def folder(self) -> Path:
@@ -74,11 +90,13 @@ def stage_names(case: Case) -> list[str]:
     return ["excavation"]
 
 
-def load_case(path: str | Path) -> LoadedCase:
-    """Read and validate a case file (YAML)."""
+def load_case(path: str | Path, allow_large: bool = False) -> LoadedCase:
+    """Read and validate a case file (YAML). A case whose mesh is estimated beyond the default size
+    limit (geoback.meshsize.max_dofs()) is refused unless `allow_large`, which the loaded case then
+    carries to wherever it is meshed."""
     data, marks = load_yaml_with_marks(path)
-    case = case_from_data(data, marks, file=str(path))
-    return LoadedCase(case, Path(path), marks)
+    case = case_from_data(data, marks, file=str(path), allow_large=allow_large)
+    return LoadedCase(case, Path(path), marks, allow_large=allow_large)
 
 
 def case_schema() -> dict:

@@ -90,7 +90,6 @@ def _instrument_problems(g: Geometry, i: int, ins) -> list[tuple[tuple, str]]:
 MAX_RADIUS = 1e3  # m: gmsh's geometry kernel fails on larger tunnels (and none is that large)
 MAX_SIZE = 1e5  # m: width and depth of the model
 MAX_STATIONS = 2_000  # stations per instrument: its covariance matrix is dense
-MAX_ELEMENTS = 1_000_000  # estimated triangles of the mesh: beyond this gmsh and the solver take far too long
 
 
 def _line_length(ins) -> float:
@@ -136,33 +135,19 @@ def _covariance_problem(ins) -> tuple[str, str] | None:
     return None
 
 
-def _mesh_estimate(case: Case) -> dict[str, float]:
-    """Rough number of triangles gmsh will make, split by the mesh size responsible."""
-    try:
-        return _mesh_estimate_(case)
-    except (ZeroDivisionError, OverflowError, ValueError):
-        return {"size_far": math.inf}
+def mesh_size_problem(case: Case, allow_large: bool = False) -> tuple[tuple, str] | None:
+    """(path, message) when the case's mesh is estimated beyond the limit (geoback.meshsize)."""
+    from .mesh import mesh_inputs  # numpy only (gmsh is imported when meshing)
+    from .meshsize import size_problem
+
+    settings = {f: getattr(case.mesh, f) for f in ("size_tunnel", "size_far", "size_instruments")}
+    found = size_problem(mesh_inputs(case), allow_large=allow_large, settings=settings)
+    return (("mesh", found[0]), found[1]) if found else None
 
 
-def _mesh_estimate_(case: Case) -> dict[str, float]:
-    g, m = case.geometry, case.mesh
-    t = m.size_tunnel or g.radius / 8
-    far = m.size_far or max(g.width, g.depth) / 12
-    k = 2.31  # triangles per h^2 of area (equilateral)
-    growth = m.growth
-    out = {"size_far": k * g.width * g.depth / (far * far), "size_tunnel": 0.0, "size_instruments": 0.0}
-    if far > t:  # graded ring around the wall: integral of 1/h^2 over the half annulus
-        out["size_tunnel"] = k * math.pi / growth * ((g.radius - t / growth) * (1 / t - 1 / far)
-                                                      + math.log(far / t) / growth)
-    si = m.size_instruments
-    if si and far > si:
-        points = sum(len(ins.points) if ins.kind in ("points", "convergence") else 25 for ins in case.instruments)
-        out["size_instruments"] = points * k * 2 * math.pi * (0.5 + math.log(far / si) / growth ** 2)
-    return out
-
-
-def physical_problems(case: Case) -> list[tuple[tuple, str]]:
-    """Checks pydantic cannot express field by field: (path, message) for each problem."""
+def physical_problems(case: Case, allow_large: bool = False) -> list[tuple[tuple, str]]:
+    """Checks pydantic cannot express field by field: (path, message) for each problem. The mesh
+    size is estimated (geoback.meshsize) and refused beyond the default limit unless `allow_large`."""
     g, problems = case.geometry, []
     if g.axis_depth - g.radius <= 0:
         problems.append((("geometry", "axis_depth"),
@@ -243,13 +228,9 @@ def physical_problems(case: Case) -> list[tuple[tuple, str]]:
         problems.append((("mesh", "size_tunnel"),
                          f"expected an element size at the wall of at most the radius {_g(g.radius)} "
                          f"(else the tunnel is not round), found {_g(case.mesh.size_tunnel)}"))
-    estimate = _mesh_estimate(case)
-    if sum(estimate.values()) > MAX_ELEMENTS:
-        worst = max(estimate, key=estimate.get)
-        problems.append((("mesh", worst),
-                         f"expected mesh sizes giving at most about {MAX_ELEMENTS:,} elements, found sizes "
-                         f"giving about {sum(estimate.values()):,.0f} (mostly from {worst} "
-                         f"{_g(getattr(case.mesh, worst) or 0) if getattr(case.mesh, worst) else '(default)'})"))
+    big = mesh_size_problem(case, allow_large)
+    if big:
+        problems.append(big)
     for i, p in enumerate(case.parameters):
         if p.bounds is not None:
             lo, hi = p.bounds

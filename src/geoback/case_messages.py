@@ -185,9 +185,8 @@ def _describe(err: dict, data: Any) -> tuple[tuple, str]:
     return at, f"expected {_expected(err, at, data)}, found {_show(found)}"
 
 
-def _pick(errors: list[dict], data: Any, marks: dict) -> tuple[tuple, str, int]:
-    """The error to report (first in the file; a misspelt key before the field it misses) and how many
-    other problems there are."""
+def _described(errors: list[dict], data: Any, marks: dict) -> list[tuple[tuple, str]]:
+    """Every problem pydantic found, as (path, message), in file order; a misspelt key once."""
     described = [_describe(e, data) + (e,) for e in errors]
     # a misspelt key shows up twice: unknown 'radus' and missing 'radius'. Report it once.
     typos = set()
@@ -202,7 +201,18 @@ def _pick(errors: list[dict], data: Any, marks: dict) -> tuple[tuple, str, int]:
         return (line if line is not None else 0, col if col is not None else 0)
 
     described.sort(key=order)
-    at, msg, _ = described[0]
+    out: list[tuple[tuple, str]] = []
+    for at, msg, _ in described:
+        if (at, msg) not in out:
+            out.append((at, msg))
+    return out
+
+
+def _pick(errors: list[dict], data: Any, marks: dict) -> tuple[tuple, str, int]:
+    """The error to report (first in the file; a misspelt key before the field it misses) and how many
+    other problems there are."""
+    described = _described(errors, data, marks)
+    at, msg = described[0]
     return at, msg, len(described) - 1
 
 

@@ -40,7 +40,9 @@ def friendly(func):
             _err(str(exc))
             raise typer.Exit(2) from None
         except KeyboardInterrupt:
-            _err("interrupted; results already written are intact")
+            from .outputs import interrupted_note
+
+            _err(f"interrupted; {interrupted_note()}")
             raise typer.Exit(130) from None
 
     return wrapper
@@ -51,31 +53,58 @@ def _say(message: str) -> None:
     typer.echo(f"  {message}", err=True)
 
 
-def _load(case: Path):
+ALLOW_LARGE_HELP = ("accept a mesh estimated beyond the default limit of 500,000 DOFs (about 1.8 GB and a "
+                    "minute for `run`; GEOBACK_MAX_DOFS changes the limit)")
+
+
+def _allow_large():
+    return typer.Option(False, "--allow-large", help=ALLOW_LARGE_HELP)
+
+
+def _load(case: Path, allow_large: bool = False):
     from .case import load_case
 
-    return load_case(case)
+    return load_case(case, allow_large=allow_large)
+
+
+OUT_HELP = ("output folder (default results/<name>); this command's previous results there are replaced "
+            "as a whole, other files kept")
+
+
+def _check_out(out: Optional[str], option: str = "--out", **kwargs) -> Optional[Path]:
+    """--out refused before any work when it cannot take results (a file, '', not writable, ...)."""
+    from .outputs import check_out
+
+    return check_out(out, option, **kwargs)
 
 
 def _out_dir(loaded, out: Optional[Path]) -> Path:
+    """The results folder: --out (checked already), else the case's output.dir, else
+    results/<name> (checked here, before any meshing)."""
     if out is not None:
         return out
     if loaded.case.output.dir:
-        return loaded.folder / loaded.case.output.dir
-    return Path("results") / loaded.case.name
+        return _check_out(str(loaded.folder / loaded.case.output.dir), "output.dir of the case")
+    return _check_out(str(Path("results") / loaded.case.name), "the results folder")
 
 
 @app.command()
 @friendly
-def validate(case: Path = typer.Argument(..., help="case file (YAML)")):
-    """Check a case file: schema, physics and instrument positions."""
-    loaded = _load(case)  # schema errors first: no heavy imports before them
-    from .identification import prepare
+def validate(case: Path = typer.Argument(..., help="case file (YAML)"), allow_large: bool = _allow_large()):
+    """Check a case file: schema, physics, mesh size, instruments, readings and parameters; list every problem."""
+    from .errors import CaseError
 
-    analysis = prepare(loaded)
-    sim = analysis.simulation
-    typer.echo(f"{case}: valid ({len(loaded.case.instruments)} instruments, {sim.survey.m} readings, "
-               f"{len(loaded.case.parameters)} parameters, {sim.dofs} dofs)")
+    try:
+        loaded = _load(case, allow_large)  # schema errors first: no heavy imports before them
+    except CaseError as exc:
+        if len(exc.problems) > 1:
+            for problem in exc.problems:
+                _err(str(problem))
+            raise typer.Exit(exc.exit_code) from None
+        raise
+    from .validation import check_case
+
+    typer.echo(check_case(loaded))
 
 
 @app.command()
@@ -90,22 +119,26 @@ def schema():
 @app.command()
 @friendly
 def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
-         out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)")):
+         out: Optional[str] = typer.Option(None, help=OUT_HELP),
+         allow_large: bool = _allow_large()):
     """Mesh the case with gmsh; write mesh.msh and mesh.vtu."""
+    out = _check_out(out)
     from .mesh import build_mesh, write_mesh
+    from .outputs import result_set
 
-    loaded = _load(case)
-    m = build_mesh(loaded.case)
+    loaded = _load(case, allow_large)
     folder = _out_dir(loaded, out)
-    write_mesh(m, folder / "mesh.msh")
-    write_mesh(m, folder / "mesh.vtu")
+    m = build_mesh(loaded.case, allow_large=allow_large)
+    with result_set(folder, "mesh") as staging:
+        write_mesh(m, staging / "mesh.msh")
+        write_mesh(m, staging / "mesh.vtu")
     typer.echo(f"{len(m.triangles)} elements, {len(m.nodes)} nodes ({2 * len(m.nodes)} dofs) -> {folder}/mesh.msh, mesh.vtu")
 
 
 @app.command()
 @friendly
 def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
-             out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
+             out: Optional[str] = typer.Option(None, help=OUT_HELP),
              vtu: bool = typer.Option(True, help="write the displacement/stress field as field.vtu"),
              set_: list[str] = typer.Option([], "--set", help="NAME=VALUE with the case's names and units (repeatable): "
                                             "E[clay]=12 MPa, Egrad[clay]=400, n[clay]=1.5, K0grad=0.05, beta=0.7, "
@@ -114,13 +147,16 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
                                                     "(default 2 for study data, 1 for a forward run)"),
              noise: bool = typer.Option(False, "--noise", help="add noise drawn from each instrument's C_x"),
              seed: int = typer.Option(0, help="seed of the noise"),
-             readings_out: Optional[Path] = typer.Option(None, help="write study data: readings as a CSV usable as "
-                                                         "readings_file (a finer mesh than the case's by default)")):
+             readings_out: Optional[str] = typer.Option(None, help="write study data: readings as a CSV usable as "
+                                                        "readings_file (a finer mesh than the case's by default)"),
+             allow_large: bool = _allow_large()):
     """Forward run: predicted readings and the field; or study data (--readings-out, --noise)."""
+    out = _check_out(out)
+    readings_out = _check_out(readings_out, "--readings-out", single_file=True)
     from .identification import prepare
     from .simulate import simulate as run_simulation, synthetic_readings, write_readings_csv
 
-    loaded = _load(case)
+    loaded = _load(case, allow_large)
     assignments = {}
     for item in set_:
         name, eq, value = item.partition("=")
@@ -131,6 +167,8 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
         factor = 2.0 if refine is None else refine
         if factor < 1:
             raise GeobackError(f"--refine must be at least 1 (a mesh finer than the case's), found {factor:g}")
+        if readings_out is None:
+            _out_dir(loaded, out)
         readings = synthetic_readings(loaded, factor, assignments, noise_seed=seed if noise else None)
         target = readings_out or _out_dir(loaded, out) / "readings.csv"
         used = ", ".join(f"{k} = {v}" for k, v in assignments.items()) or "the case's values"
@@ -142,13 +180,13 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
         typer.echo(f"{sum(len(v) for v in readings.values())} readings ({used}; {mesh}"
                    f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
         return
+    if refine not in (None, 1.0):
+        raise GeobackError("--refine applies to study data (--readings-out or --noise)")
+    folder = _out_dir(loaded, out)
     analysis = prepare(loaded, parameters=[], with_readings=False)
     from .parameters import resolve_values
 
     values = {**analysis.values, **resolve_values(analysis.simulation, assignments)}
-    if refine not in (None, 1.0):
-        raise GeobackError("--refine applies to study data (--readings-out or --noise)")
-    folder = _out_dir(loaded, out)
     res = run_simulation(analysis, folder, values=values, vtu=vtu and loaded.case.output.vtu)
     used = ", ".join(f"{k} = {v}" for k, v in assignments.items())
     typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs"
@@ -158,19 +196,21 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
 @app.command()
 @friendly
 def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
-             out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
+             out: Optional[str] = typer.Option(None, help=OUT_HELP),
              alpha: float = typer.Option(0.05, help="significance level of the adequacy and hypothesis tests"),
              plots: bool = typer.Option(True, help="write the before/after figure"),
-             quiet: bool = typer.Option(False, "--quiet", "-q")):
+             quiet: bool = typer.Option(False, "--quiet", "-q"),
+             allow_large: bool = _allow_large()):
     """Is the model adequate? If not: where is the mismatch, what physics is missing, how much better it fits."""
     from .diagnosis import diagnose as run_diagnosis, diagnosis_text, write_diagnosis
     from .diagnosis.report import verdict
     from .explore import explore
 
-    loaded = _load(case)
+    out = _check_out(out)
+    loaded = _load(case, allow_large)
+    folder = _out_dir(loaded, out)
     say = None if quiet else _say
     d = run_diagnosis(loaded, alpha=alpha, progress=say)
-    folder = _out_dir(loaded, out)
     exploration = explore(d.final_misfit, d.final, ("profiles",)) if plots else None
     write_diagnosis(d, folder, plots=plots, exploration=exploration)
     if not quiet:
@@ -188,22 +228,24 @@ move from the initial values; 2 the input was refused (the message names file, l
 @app.command(epilog=EXIT_CODES)
 @friendly
 def run(case: Path = typer.Argument(..., help="case file (YAML)"),
-        out: Optional[Path] = typer.Option(None, help="output folder (default results/<name>)"),
+        out: Optional[str] = typer.Option(None, help=OUT_HELP),
         method: Optional[str] = typer.Option(None, help="lm, lm-scaled or gn (default: the case's fit.method)"),
         plots: bool = typer.Option(False, "--plots", help="also write figures (PNG and SVG)"),
         profile: bool = typer.Option(False, "--profile", help="profile-likelihood intervals for every parameter "
                                      "(by default only where the linearised interval is unreliable)"),
         strict: bool = typer.Option(False, "--strict", help="exit 3 if the result carries any warning (for CI)"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="print only the final line"),
-        as_json: bool = typer.Option(False, "--json", help="print summary.json to stdout")):
+        as_json: bool = typer.Option(False, "--json", help="print summary.json to stdout"),
+        allow_large: bool = _allow_large()):
     """Identify the case's parameters by maximum likelihood and write all results."""
     if method is not None and method not in ("lm", "lm-scaled", "gn"):
         raise GeobackError(f"--method must be lm, lm-scaled or gn, not '{method}'")
-    loaded = _load(case)  # schema errors first: no heavy imports before them
+    out = _check_out(out)
+    loaded = _load(case, allow_large)  # schema errors first: no heavy imports before them
+    folder = _out_dir(loaded, out)
     from .report import report_text, summary
     from .run import run_case
 
-    folder = _out_dir(loaded, out)
     names: list[str] = []
     talk = not quiet and not as_json
 
@@ -294,15 +336,23 @@ def batch(targets: list[str] = typer.Argument(..., help="folders (every *.yaml i
           workers: Optional[int] = typer.Option(None, help="local worker processes (default min(2, CPUs); unused with --scheduler)"),
           scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address (tcp://host:8786) "
                                                   "instead of local processes"),
-          out: Path = typer.Option(Path("results/batch"), help="output folder: summary.csv and <case name>/")):
+          out: str = typer.Option("results/batch", help="output folder: summary.csv and <case name>/"),
+          allow_large: bool = _allow_large()):
     """Identify many cases in parallel; write summary.csv and each case's results. Exit 1 if any failed."""
+    out = _check_out(out, replaced=False)
     from .batch import failed, run_batch
 
     def progress(row):
         extra = f": {row['message']}" if row["message"] else ""
         typer.echo(f"  {row['case']} ({row['file']}): {row['status']}{extra}", err=True)
 
-    rows = run_batch(targets, out, workers=workers, scheduler=scheduler, progress=progress)
+    try:
+        rows = run_batch(targets, out, workers=workers, scheduler=scheduler, progress=progress,
+                         allow_large=allow_large)
+    except KeyboardInterrupt:
+        _err(f"interrupted; each case's folder in {out} holds its previous or its new complete results; "
+             f"{out / 'summary.csv'} was not updated")
+        raise typer.Exit(130) from None
     bad = failed(rows)
     typer.echo(f"{len(rows) - len(bad)} of {len(rows)} case(s) converged -> {out / 'summary.csv'}")
     if bad:

@@ -62,7 +62,7 @@ class ElasticSimulation(Simulation):
         case = loaded.case
         self.loaded = loaded
         t0 = time.perf_counter()
-        self.mesh = mesh or build_mesh(case)
+        self.mesh = mesh or build_mesh(case, allow_large=getattr(loaded, "allow_large", False))
         t1 = time.perf_counter()
         g = case.geometry
         self.fe = FEModel(self.mesh, g.width, g.depth, (0.0, -g.axis_depth), g.radius)

@@ -9,12 +9,19 @@ class GeobackError(Exception):
 
 
 class CaseError(GeobackError):
-    """A mistake in a case file, located by file, line, column and field path."""
+    """A mistake in a case file, located by file, line, column and field path.
+
+    ``problems`` lists every problem found (each a CaseError with one located message; the
+    error itself when there is only one): the message of the error is the first of them with
+    "(and N more problems)", and `geoback validate` prints them all, one per line.
+    """
 
     def __init__(self, message: str, file: str | None = None, line: int | None = None,
-                 column: int | None = None, field: str | None = None):
+                 column: int | None = None, field: str | None = None,
+                 problems: "list[CaseError] | None" = None):
         self.file, self.line, self.column, self.field = file, line, column, field
         self.reason = message
+        self.problems: list[CaseError] = list(problems) if problems else [self]
         where = ""
         if file:
             where = str(file)

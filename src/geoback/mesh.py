@@ -1,18 +1,27 @@
-"""Meshing the half-model with gmsh (headless, deterministic, cached by a hash of its inputs)."""
+"""Meshing the half-model with gmsh (headless, deterministic, cached by a hash of its inputs).
+
+The size of the mesh is estimated before gmsh runs (geoback.meshsize) and refused beyond the
+default limit unless ``allow_large``. Cache entries (``$GEOBACK_CACHE/meshes/<key>.npz``, default
+``~/.cache/geoback``) carry a checksum of their arrays; an entry that is truncated, empty, corrupt
+or inconsistent (wrong shapes, indices out of range) is rebuilt with a one-line notice on stderr,
+and a cache that cannot be written is skipped with a notice.
+"""
 from __future__ import annotations
 
 import hashlib
 import json
 import os
+import sys
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .case import Case
+from .case_schema import Case
 
-MESH_FORMAT = 4  # bump when the meshing procedure changes, to invalidate caches
+MESH_FORMAT = 5  # bump when the meshing procedure or the cache layout changes, to invalidate caches
 
 
 @dataclass(frozen=True)
@@ -105,34 +114,139 @@ def mesh_key(inputs: dict) -> str:
 
 
 GMSH_CALLS = 0  # counts real gmsh runs (tests check that the cache avoids them)
+_ARRAYS = ("nodes", "triangles", "region", "region_names", "tunnel_edges")
+_STALE_TMP_SECONDS = 3600  # temporary files of a writer killed midway are removed after this
 
 
-def build_mesh(case: Case, use_cache: bool = True) -> Mesh:
-    """Mesh of the case, from the on-disk cache when the same inputs were meshed before."""
+def notice(message: str) -> None:
+    """One line on stderr about something geoback repaired on its own."""
+    print(f"notice: {message}", file=sys.stderr, flush=True)
+
+
+def build_mesh(case: Case, use_cache: bool = True, allow_large: bool = False) -> Mesh:
+    """Mesh of the case, from the on-disk cache when the same inputs were meshed before.
+
+    Raises GeobackError, before gmsh runs, when the mesh is estimated beyond
+    the default size limit (geoback.meshsize.max_dofs()), unless `allow_large`.
+    """
+    from .errors import GeobackError
+    from .meshsize import size_problem
+
     inputs = mesh_inputs(case)
+    too_big = size_problem(inputs, allow_large=allow_large)
+    if too_big:
+        raise GeobackError(f"mesh of case '{case.name}': {too_big[1]}")
     key = mesh_key(inputs)
     path = cache_dir() / "meshes" / f"{key}.npz"
-    if use_cache and path.exists():
-        try:
-            with np.load(path) as z:
-                return Mesh(z["nodes"], z["triangles"], z["region"], tuple(z["region_names"].tolist()),
-                            z["tunnel_edges"], key)
-        except (OSError, KeyError, ValueError):
-            pass  # a damaged cache entry is rebuilt
+    if use_cache:
+        mesh = _read_cached(path, inputs, key)
+        if mesh is not None:
+            return mesh
     try:
         mesh = _run_gmsh(inputs, key)
     except Exception as exc:  # gmsh and OpenCASCADE raise plain exceptions
-        from .errors import GeobackError
-
         raise GeobackError(f"gmsh could not mesh this geometry ({exc}); check the geometry and mesh sizes") from None
     if use_cache:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
-        os.close(fd)
-        np.savez(tmp, nodes=mesh.nodes, triangles=mesh.triangles, region=mesh.region,
-                 region_names=np.array(mesh.region_names), tunnel_edges=mesh.tunnel_edges)
-        os.replace(tmp, path)
+        _write_cached(path, mesh)
     return mesh
+
+
+def _checksum(arrays: dict) -> str:
+    h = hashlib.sha256()
+    for name in _ARRAYS:
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"{name}:{a.dtype.str}:{a.shape};".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _read_cached(path: Path, inputs: dict, key: str) -> Mesh | None:
+    """The cached mesh, or None when there is none or it is damaged (then a notice says so)."""
+    try:
+        if not path.exists():
+            return None
+    except OSError:
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {name: z[name] for name in _ARRAYS}
+            stored = str(z["checksum"])
+        problem = _inconsistency(arrays, stored, inputs)
+    except Exception as exc:  # noqa: BLE001 - BadZipFile, EOFError, zlib errors, KeyError, ...: all mean damaged
+        text = str(exc).split(". ")[0]
+        problem = f"unreadable: {type(exc).__name__}{': ' + text if text else ''}"
+    if problem is None:
+        return Mesh(arrays["nodes"], arrays["triangles"], arrays["region"],
+                    tuple(arrays["region_names"].tolist()), arrays["tunnel_edges"], key)
+    notice(f"cached mesh {path} is damaged ({' '.join(problem.split())[:200]}); meshing again")
+    return None
+
+
+def _inconsistency(arrays: dict, stored: str, inputs: dict) -> str | None:
+    """What is wrong with a cache entry's arrays (None if nothing)."""
+    nodes, tri, region, names, edges = (arrays[n] for n in _ARRAYS)
+    npe = 6 if inputs["order"] == 2 else 3
+    if nodes.dtype != np.float64 or nodes.ndim != 2 or nodes.shape[1] != 2 or len(nodes) < 3:
+        return f"nodes of shape {nodes.shape} and type {nodes.dtype}"
+    if tri.dtype.kind not in "iu" or tri.ndim != 2 or tri.shape[1] != npe or len(tri) == 0:
+        return f"triangles of shape {tri.shape} and type {tri.dtype}, expected (n, {npe}) integers"
+    if region.dtype.kind not in "iu" or region.shape != (len(tri),):
+        return f"{region.shape} region indices for {len(tri)} triangles"
+    if names.dtype.kind != "U" or tuple(names.tolist()) != tuple(inputs["names"]):
+        return "layer names differ from the case's"
+    if edges.dtype.kind not in "iu" or edges.ndim != 2 or edges.shape[1] != (3 if npe == 6 else 2) or len(edges) == 0:
+        return f"tunnel edges of shape {edges.shape}"
+    if stored != _checksum(arrays):
+        return "checksum mismatch"
+    if tri.min() < 0 or tri.max() >= len(nodes):
+        return "triangles refer to nodes that do not exist"
+    if region.min() < 0 or region.max() >= len(names):
+        return "region indices out of range"
+    if edges.min() < 0 or edges.max() >= len(nodes):
+        return "tunnel edges refer to nodes that do not exist"
+    if not np.isfinite(nodes).all():
+        return "non-finite node coordinates"
+    return None
+
+
+def _write_cached(path: Path, mesh: Mesh) -> None:
+    """Store the mesh atomically (temporary file, then rename); a cache that cannot be written is
+    skipped with a notice."""
+    arrays = {"nodes": mesh.nodes, "triangles": mesh.triangles, "region": mesh.region,
+              "region_names": np.array(mesh.region_names, dtype=str), "tunnel_edges": mesh.tunnel_edges}
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _remove_stale_temporaries(path.parent)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".tmp.npz")
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, checksum=np.array(_checksum(arrays)), **arrays)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; a shared cache keeps the usual mode
+        os.replace(tmp, path)
+        tmp = None
+    except OSError as exc:
+        notice(f"could not write the mesh cache in {path.parent} ({exc.strerror or exc}); continuing without it")
+    finally:
+        if tmp is not None and os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _remove_stale_temporaries(folder: Path) -> None:
+    now = time.time()
+    for leftover in folder.glob(".*.tmp.npz"):
+        try:
+            if now - leftover.stat().st_mtime > _STALE_TMP_SECONDS:
+                leftover.unlink()
+        except OSError:
+            pass
 
 
 def _run_gmsh(inputs: dict, key: str) -> Mesh:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .outputs import write_atomic, write_csv, write_json, write_matrix_csv
+from .outputs import result_set, write_atomic, write_csv, write_json, write_matrix_csv
 
 
 def reading_label(lab) -> str:
@@ -104,7 +104,13 @@ def write_field(field, path: Path) -> None:
 
 
 def write_run(res, out: Path, exploration=None, plots: bool = False) -> None:
-    """Every file of a run into `out`; the field (field.vtu) and figures if the exploration has them."""
+    """Every file of a run, replacing the previous run's set in `out` as a whole (outputs.result_set);
+    the field (field.vtu) and figures if the exploration has them."""
+    with result_set(out, "run") as staging:
+        _write_run(res, staging, exploration, plots)
+
+
+def _write_run(res, out: Path, exploration, plots: bool) -> None:
     f, rel, params = res.fit, res.reliability, res.parameters
     names = params.names
     out = Path(out)

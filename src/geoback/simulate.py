@@ -8,11 +8,11 @@ from typing import Mapping
 import numpy as np
 
 from .case import LoadedCase
-from .identification import Analysis, prepare
 from .errors import GeobackError
-from .outputs import write_csv, write_json
-from .readings import measured_values
+from .identification import Analysis, prepare
+from .outputs import result_set, write_csv, write_json
 from .parameters import resolve_values
+from .readings import measured_values
 
 READING_HEADER = ["instrument", "kind", "station", "component", "x", "y", "computed"]
 
@@ -39,22 +39,22 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
     sim = analysis.simulation
     values = dict(values if values is not None else analysis.values)
     x = sim.predict(values).x
-    out = Path(out)
     try:
         measured = measured_values(analysis.loaded, sim.survey.blocks)
     except GeobackError:  # readings not at every stage: list the predictions alone
         measured = None
     header = READING_HEADER + (["measured"] if measured is not None else [])
     rows = reading_rows(sim.survey.labels, x, measured)
-    write_csv(out / "predicted.csv", header, rows)
-    write_json(out / "predicted.json", {
-        "case": analysis.case.name,
-        "values": values,
-        "dofs": sim.dofs,
-        "readings": [dict(zip(header, r)) for r in rows],
-    })
-    if vtu:
-        write_field(sim.field(values), out / "field.vtu")
+    with result_set(out, "simulate") as staging:  # the previous set replaced as a whole
+        write_csv(staging / "predicted.csv", header, rows)
+        write_json(staging / "predicted.json", {
+            "case": analysis.case.name,
+            "values": values,
+            "dofs": sim.dofs,
+            "readings": [dict(zip(header, r)) for r in rows],
+        })
+        if vtu:
+            write_field(sim.field(values), staging / "field.vtu")
     return {"readings": x, "dofs": sim.dofs}
 
 
@@ -78,7 +78,7 @@ def synthetic_readings(loaded: LoadedCase, refine: float = 2.0, values: Mapping 
     `values` overrides named quantities, by name as in a case file, with units if wished (e.g.
     {'Egrad[clay]': 500, 'E': '12 MPa', 'B[I1]': 0.002}); unknown names are refused. Noise is L z
     with C_x = L L^t per instrument (eqn 10), seeded."""
-    fine = LoadedCase(refined_case(loaded.case, refine), loaded.path, loaded.marks)
+    fine = loaded.with_case(refined_case(loaded.case, refine))
     analysis = prepare(fine, parameters=[], with_readings=False)
     sim = analysis.simulation
     named = dict(analysis.values)

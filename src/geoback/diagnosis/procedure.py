@@ -264,14 +264,13 @@ def _split_layer_misfit(current: Misfit, case, loaded, layer: str, z: float, p_h
                         E_below: float) -> Misfit:
     """The current model with layer `layer` split at depth z into two meshed layers (conforming
     boundary) and the lower layer's modulus identified."""
-    from ..case import LoadedCase
     from ..simulation import make_simulation
 
     layers = list(case.ground.layers)
     i = [ly.name for ly in layers].index(layer)
     lower = layers[i].model_copy(update={"name": f"{layer}_below", "top": float(z), "E": float(E_below)})
     ground = case.ground.model_copy(update={"layers": layers[:i + 1] + [lower] + layers[i + 1:]})
-    split = LoadedCase(case.model_copy(update={"ground": ground}), loaded.path, loaded.marks)
+    split = loaded.with_case(case.model_copy(update={"ground": ground}))
     sim = make_simulation(split, backend=getattr(current.simulation, "backend", None),
                           blocks=list(current.data.blocks))
     spec = Parameter(name=f"E[{layer}_below]", initial=float(E_below), bounds=(float(E_below) / 50, float(E_below) * 50))

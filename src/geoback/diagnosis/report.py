@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..outputs import write_atomic, write_json
+from ..outputs import result_set, write_atomic, write_json
 
 
 def _fit_line(chi2: float, dof: int, p: float) -> str:
@@ -109,12 +109,12 @@ def diagnosis_json(d) -> dict:
 
 
 def write_diagnosis(d, out: Path, plots: bool = True, exploration=None) -> None:
-    """diagnosis.md, diagnosis.json and (plots) diagnosis.png/.svg; `exploration` gives the figure
-    the model along each instrument at the final fit."""
-    out = Path(out)
-    write_atomic(out / "diagnosis.md", diagnosis_text(d))
-    write_json(out / "diagnosis.json", diagnosis_json(d))
-    if plots:
-        from .figure import plot_before_after
+    """diagnosis.md, diagnosis.json and (plots) diagnosis.png/.svg, replacing the previous set in `out`
+    as a whole; `exploration` gives the figure the model along each instrument at the final fit."""
+    with result_set(out, "diagnose") as staging:
+        write_atomic(staging / "diagnosis.md", diagnosis_text(d))
+        write_json(staging / "diagnosis.json", diagnosis_json(d))
+        if plots:
+            from .figure import plot_before_after
 
-        plot_before_after(d, out, exploration)
+            plot_before_after(d, staging, exploration)
