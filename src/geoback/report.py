@@ -36,11 +36,17 @@ def summary(res, exploration=None) -> dict:
         "J": f.J, "chi2": rel.chi2, "dof": rel.dof, "reduced_chi2": rel.reduced_chi2, "p_value": rel.p_value,
         "minus_2_log_likelihood": rel.minus2logL, "aic": rel.aic, "bic": rel.bic,
         "condition_number": rel.condition, "undetermined": rel.undetermined,
+        "error_scales": [e.as_dict() for e in rel.error_scales],
         "readings": res.data.m, "dofs": res.dofs, "elements": res.elements,
         **res.counts, "solver": res.solver,
         "timings_s": {k: round(v, 4) for k, v in res.seconds.items()},
         "platform": platform.platform(),
     }
+    if rel.parameter_dof is not None:  # estimated error scales: t intervals and the F ellipse
+        for i, n in enumerate(params.names):
+            out["parameters"][n]["dof"] = rel.parameter_dof[i]
+        out["ellipse_dof"] = rel.ellipse_dof
+        out["ellipse_limit_95"] = rel.ellipse_limit(0.95)
     if exploration is not None:  # the work of the field file and figures, apart from the identification's
         out["exploration"] = {k: exploration.counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}
         out["timings_s"]["exploration"] = round(exploration.seconds, 4)
@@ -55,8 +61,7 @@ def report_text(res) -> str:
               f"- method: {f.method}, {f.iterations} iterations, {res.counts['factorisations']} factorisation(s), "
               f"{res.counts['solves']} solves",
               f"- readings m = {res.data.m}, parameters n = {params.n}, dofs = {res.dofs}",
-              f"- chi-square = {rel.chi2:.6g}, dof = {rel.dof}, reduced chi-square = {rel.reduced_chi2:.4g}, "
-              f"p-value = {rel.p_value:.3g}",
+              chi2_line(rel),
               f"- AIC = {rel.aic:.6g}, BIC = {rel.bic:.6g}, condition number = {rel.condition:.3g}", "",
               "| parameter | unit | initial | estimate | std | 95 % interval |", "|---|---|---|---|---|---|"]
     lo, hi = rel.interval95()
@@ -65,6 +70,12 @@ def report_text(res) -> str:
         bound = " (at bound)" if f.at_bound[i] else ""
         lines.append(f"| {n} | {params.units[i]} | {params.initial[i]:.6g} | {f.p[i]:.6g}{bound} | "
                      f"{rel.std[i]:.3g}{pct} | [{lo[i]:.6g}, {hi[i]:.6g}] |")
+    if rel.parameter_dof is not None:
+        lines += ["", "The error scales are estimated: the intervals are Student t on "
+                  + ", ".join(f"{n} {d:.3g}" for n, d in zip(params.names, rel.parameter_dof))
+                  + f" degrees of freedom (Satterthwaite), the 95 % ellipse d² < {rel.ellipse_limit(0.95):.3g} "
+                    f"(n F(n, {rel.ellipse_dof:.3g}))."]
+    lines += error_scale_lines(rel)
     strong = [(params.names[i], params.names[j], rel.correlation[i, j])
               for i in range(params.n) for j in range(i + 1, params.n)
               if np.isfinite(rel.correlation[i, j]) and abs(rel.correlation[i, j]) > 0.5]
@@ -82,11 +93,48 @@ def report_text(res) -> str:
     if rel.dof > 0 and rel.p_value < 0.05:
         warnings.append(f"chi-square is too large for the stated measurement errors (p = {rel.p_value:.2g}): "
                         "the model may be missing physics - try `geoback diagnose`")
+    for e in rel.error_scales:
+        if e.estimated and e.p_allowed < 0.05:
+            warnings.append(e.text + " - try `geoback diagnose`")
     if f.at_bound.any():
         warnings.append("at a bound: " + ", ".join(n for n, b in zip(params.names, f.at_bound) if b))
     if warnings:
         lines += ["", "Warnings:"] + [f"- {w}" for w in warnings]
     return "\n".join(lines) + "\n"
+
+
+def chi2_line(rel) -> str:
+    if not rel.scales_estimated:
+        return (f"- chi-square = {rel.chi2:.6g}, dof = {rel.dof}, reduced chi-square = {rel.reduced_chi2:.4g}, "
+                f"p-value = {rel.p_value:.3g}")
+    if rel.dof <= 0:
+        return "- chi-square: every reading's scale is estimated, so no χ² test of the stated σ's (see the error scales)"
+    return (f"- chi-square of the readings whose σ is known (and of the priors) = {rel.chi2:.6g}, dof = {rel.dof:.4g}, "
+            f"reduced chi-square = {rel.reduced_chi2:.4g}, p-value = {rel.p_value:.3g} (Satterthwaite)")
+
+
+ERROR_SCALE_HEADER = ["group", "instruments", "treatment", "readings", "dof", "k", "k_low95", "k_high95",
+                      "k_readings", "p_stated", "p_allowed", "allowed_test", "ratio_to_others", "J_stated", "text"]
+
+
+def error_scale_rows(rel) -> list[list]:
+    return [[e.name, " ".join(e.instruments), e.treatment, e.readings, e.dof, e.factor, e.low, e.high,
+             e.readings_factor, e.p_stated, e.p_allowed, e.allowed_test, e.ratio_to_others, e.J, e.text]
+            for e in rel.error_scales]
+
+
+def error_scale_lines(rel) -> list[str]:
+    """The error-scale table of the report: k = true σ / stated σ of each instrument or group."""
+    if not rel.error_scales:
+        return []
+    out = ["", "Error scales (k = true σ / stated σ; c = readings minus the parameters' share):", "",
+           "| group | treatment | readings | c | k | 95 % interval | p (stated σ) |", "|---|---|---|---|---|---|---|"]
+    for e in rel.error_scales:
+        k = f"{e.factor:.3g}" if e.estimated else f"1 (readings: {e.readings_factor:.3g})"
+        out.append(f"| {e.name} | {e.treatment} | {e.readings} | {e.dof:.3g} | {k} | [{e.low:.3g}, {e.high:.3g}] | "
+                   f"{e.p_stated:.2g} |")
+    out += [""] + [f"- {e.text}" for e in rel.error_scales]
+    return out
 
 
 def write_field(field, path: Path) -> None:
@@ -121,6 +169,7 @@ def write_run(res, out: Path, exploration=None, plots: bool = False) -> None:
                "whitened_residual", "leverage"],
               [[lab.instrument, lab.kind, lab.station, lab.component, lab.x, lab.y, measured[i],
                 f.x[i], residual[i], rel.whitened_residual[i], rel.leverage[i]] for i, lab in enumerate(res.data.labels)])
+    write_csv(out / "error_scales.csv", ERROR_SCALE_HEADER, error_scale_rows(rel))
     write_csv(out / "iterations.csv", ["iteration", "mu", "J"] + names + ["accepted"],
               [[h.k, h.mu, h.J] + list(h.p) + [h.accepted] for h in f.history])
     if exploration is not None and exploration.field is not None:
