@@ -364,3 +364,79 @@ def test_schema_documents_error_scales():
     defs = schema["$defs"]
     assert "within" in defs["ScalePrior"]["properties"]
     assert defs["ErrorScale"]["properties"]["scale"]["description"].startswith("'estimate'")
+
+
+# ---------------------------------------------------------------------------- diagnose
+CONCEALED = ROOT / "cases" / "concealed"
+
+
+def _concealed_with_scales(tmp_path, name: str, scales, readings: dict | None = None) -> Path:
+    """A concealed case with error_scales (and optionally other readings), written next to its CSV."""
+    import shutil
+
+    from geoback.simulate import write_readings_csv
+
+    data = yaml.safe_load((CONCEALED / f"{name}.yaml").read_text())
+    data["error_scales"] = scales
+    if readings is None:
+        shutil.copy(CONCEALED / f"{name}.csv", tmp_path / f"{name}.csv")
+    else:
+        write_readings_csv(None, readings, tmp_path / f"{name}.csv")
+    path = tmp_path / f"{name}-scaled.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def test_diagnose_free_scale_does_not_hide_missing_physics(tmp_path):
+    """The toe of I1 moved 4 mm; I1's scale is free. Its scale comes out far above the others'
+    (a located mismatch, not an explanation), the hypothesis scored with the scale held at its
+    null estimate is still significant, the refit finds B[I1] and I1's scale returns to ~1."""
+    from geoback.diagnosis import diagnose
+    from geoback.diagnosis.report import diagnosis_json, diagnosis_text
+
+    d = diagnose(load_case(_concealed_with_scales(tmp_path, "toe-moved", [{"instruments": ["I1"]}])))
+    first = d.rounds[0]
+    assert not d.adequate_before
+    scale_mismatch = [m for m in first.mismatches if m.kind == "error-scale"]
+    assert [m.instrument for m in scale_mismatch] == ["I1"] and scale_mismatch[0].size > 2
+    assert [s.hypothesis.kind for s in d.accepted] == ["integration-constant"]
+    rel = d.final_reliability
+    lo, hi = rel.interval95()
+    i = rel.names.index("B[I1]")
+    assert lo[i] <= 0.004 <= hi[i]
+    assert d.adequate_after
+    i1 = next(e for e in rel.error_scales if e.name == "I1")
+    assert i1.low < 1.0 < i1.high
+    text = diagnosis_text(d)
+    assert "I1's errors are" in text and "beyond what the case allows" in text
+    assert diagnosis_json(d)["rounds"][0]["error_scales"][0]["name"] == "I1"
+
+
+def test_diagnose_sloppy_instrument_is_a_located_mismatch_not_adequate(tmp_path):
+    """No physics missing, but I1 was read 3x less accurately than stated and its scale is free:
+    diagnose does not call that adequate, names I1 and accepts no hypothesis."""
+    from geoback.case import LoadedCase
+    from geoback.diagnosis import diagnose
+    from geoback.diagnosis.report import verdict
+    from geoback.simulate import synthetic_readings
+
+    data = yaml.safe_load((CONCEALED / "null-1.yaml").read_text())
+    truth = LoadedCase(case_from_data(data), CONCEALED / "null-1.yaml", {})
+    clean = synthetic_readings(truth, refine=2.0)
+    noisy = synthetic_readings(truth, refine=2.0, noise_seed=11)
+    noisy["I1"] = clean["I1"] + 3 * (noisy["I1"] - clean["I1"])
+    d = diagnose(load_case(_concealed_with_scales(tmp_path, "null-1", [{"instruments": ["I1"]}], noisy)))
+    assert not d.adequate_before and not d.accepted
+    assert d.rounds[0].mismatches[0].kind == "error-scale"
+    words = verdict(d)
+    assert "I1's errors are" in words and "within the errors the case allows" in words
+    i1 = d.baseline_reliability.error_scales[0]
+    assert i1.name == "I1" and i1.low < 3.0 < i1.high
+
+
+def test_diagnose_null_case_with_a_free_scale_is_adequate(tmp_path):
+    from geoback.diagnosis import diagnose
+
+    d = diagnose(load_case(_concealed_with_scales(tmp_path, "null-1", [{"instruments": ["I1"]}])))
+    assert d.adequate_before and not d.accepted
+    assert d.rounds[0].scales[0].estimated

@@ -114,7 +114,8 @@ def fit(misfit: Misfit, settings: Settings = Settings(), method: str | None = No
         misfit = settled  # near the optimum already: restart with the damping the last round ended with
         mu = [h.mu for h in result.history if h.accepted][-1]
         warm = replace(settings, mu0=max(mu, 1e-12 * settings.mu0))
-        again = _iterate(misfit, warm, method, result.p, max_iterations, progress)
+        shown = (lambda it, k0=result.iterations: progress(replace(it, k=it.k + k0))) if progress else None
+        again = _iterate(misfit, warm, method, result.p, max_iterations, shown)
         again.history = result.history + [replace(h, k=h.k + result.iterations) for h in again.history]
         again.iterations += result.iterations
         again.moved = again.moved or result.moved

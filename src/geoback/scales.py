@@ -348,8 +348,8 @@ def stated_p(J: float, c: float) -> float:
     """Two-sided p of k = 1: J ~ chi2(c)."""
     if c <= 0:
         return float("nan")
-    F = chi2_cdf(J, c)
-    return float(min(1.0, 2 * min(F, 1 - F)))
+    lower, upper = special.gammainc(c / 2, J / 2), special.gammaincc(c / 2, J / 2)
+    return float(min(1.0, 2 * min(lower, upper)))
 
 
 def prior_predictive_p(g: ScaleGroup, J: float, c: float) -> float:
@@ -375,8 +375,16 @@ def others_p(J: float, c: float, J_rest: float, c_rest: float) -> tuple[float, f
     return math.sqrt(F), float(special.fdtrc(c, c_rest, F))
 
 
-def _fmt_p(p: float) -> str:
-    return "nan" if not np.isfinite(p) else f"{p:.2g}"
+def _p(p: float) -> str:
+    """'p = 0.012' (or 'p < 1e-300' where it underflows)."""
+    if not np.isfinite(p):
+        return "p = nan"
+    return f"p = {p:.2g}" if p > 0 else "p < 1e-300"
+
+
+def _k(v: float) -> str:
+    """A factor as people write it: 3.4, 1.0, 0.64, 12."""
+    return f"{v:.1f}" if 1 <= v < 10 else f"{v:.2g}"
 
 
 def describe(e: ScaleEstimate) -> str:
@@ -386,20 +394,20 @@ def describe(e: ScaleEstimate) -> str:
     if not np.isfinite(e.p_stated):
         return f"{who}: too few readings beyond the parameters to judge its stated σ"
     consistent = e.p_stated >= 1 - e.level
-    verdict = (f"consistent with the stated σ (p = {_fmt_p(e.p_stated)})" if consistent else
-               f"the stated σ is not consistent with its readings (p = {_fmt_p(e.p_stated)})")
+    verdict = (f"consistent with the stated σ ({_p(e.p_stated)})" if consistent else
+               f"the stated σ is not consistent with its readings ({_p(e.p_stated)})")
     if e.estimated:
-        text = (f"{who}'s errors are {e.factor:.2g}× what the case states ({lv} [{e.low:.2g}, {e.high:.2g}]); "
+        text = (f"{who}'s errors are {_k(e.factor)}× what the case states ({lv} [{e.low:.2g}, {e.high:.2g}]); "
                 f"{verdict}")
         if e.allowed_test == "prior" and e.p_allowed < 1 - e.level:
-            text += (f"; its readings alone ask for {e.readings_factor:.2g}×, more than its prior allows "
-                     f"(p = {_fmt_p(e.p_allowed)})")
+            text += (f"; its readings alone ask for {_k(e.readings_factor)}×, more than its prior allows "
+                     f"({_p(e.p_allowed)})")
         elif e.allowed_test == "others" and e.p_allowed < 1 - e.level:
-            text += (f"; {e.ratio_to_others:.2g}× the other instruments' scale (p = {_fmt_p(e.p_allowed)}): "
+            text += (f"; {_k(e.ratio_to_others)}× the other instruments' scale ({_p(e.p_allowed)}): "
                      f"either {who} was read less accurately than stated or the model misses something "
                      f"that shows at {who}")
         return text
-    return (f"{who}: σ taken as stated; its readings alone suggest {e.readings_factor:.2g}× ({lv} [{e.low:.2g}, "
+    return (f"{who}: σ taken as stated; its readings alone suggest {_k(e.readings_factor)}× ({lv} [{e.low:.2g}, "
             f"{e.high:.2g}]), {verdict}")
 
 

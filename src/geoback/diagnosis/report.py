@@ -80,8 +80,10 @@ def diagnosis_text(d) -> str:
     for k, rnd in enumerate(d.rounds, 1):
         lines += [f"## Round {k}", "", f"- fit: {_fit_line(rnd.chi2, rnd.dof, rnd.p_value)}"] + _scale_lines(rnd)
         if rnd.adequate and rnd.accepted is None:
-            lines += [f"- adequate: the χ² test passes at the {100 * d.alpha:g} % level and no hypothesis' score test "
-                      f"is significant at {rnd.threshold:.2g} (= {d.alpha:g} / number of hypotheses); stop"]
+            scales = (", every estimated error scale is within what the case allows"
+                      if any(e.estimated for e in rnd.scales) else "")
+            lines += [f"- adequate: the χ² test passes at the {100 * d.alpha:g} % level{scales} and no hypothesis' "
+                      f"score test is significant at {rnd.threshold:.2g} (= {d.alpha:g} / number of hypotheses); stop"]
         else:
             lines += ["- where the model and the readings differ:"] + [f"  - {m.text}" for m in rnd.mismatches[:4]]
         if rnd.ranking:
