@@ -240,6 +240,7 @@ class Replicates:
     scale_high: np.ndarray | None = None
     ellipse_dof: np.ndarray | None = None  # (N,)
     ellipse_limit: np.ndarray | None = None  # (N,) 95 % limit of d^2
+    scale_dof: np.ndarray | None = None  # (N, G) restricted dof c_g = m_g - h_g of each estimated scale
 
     def inside(self, truth: np.ndarray, level: float = 0.95) -> np.ndarray:
         """Is `truth` inside each replicate's `level` ellipse (F ellipse when scales are estimated)?"""
@@ -269,7 +270,7 @@ def identify_replicates(analysis: Analysis, measured: np.ndarray, method: str | 
     P, S, C, J = np.empty((N, n)), np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
     ok, bound = np.zeros(N, bool), np.zeros((N, n), bool)
     est = [k for k, g in enumerate(base.scales) if g.estimated]
-    K, lo, hi = (np.full((N, len(est)), np.nan) for _ in range(3))
+    K, lo, hi, dof = (np.full((N, len(est)), np.nan) for _ in range(4))
     edof, elim = np.full(N, np.inf), np.full(N, np.nan)
     for i, x in enumerate(measured):
         mis = base.with_measured(x)
@@ -280,6 +281,7 @@ def identify_replicates(analysis: Analysis, measured: np.ndarray, method: str | 
             K[i] = [rel.error_scales[k].factor for k in est]
             lo[i] = [rel.error_scales[k].low for k in est]
             hi[i] = [rel.error_scales[k].high for k in est]
+            dof[i] = [rel.error_scales[k].dof for k in est]
             edof[i], elim[i] = rel.ellipse_dof, rel.ellipse_limit(0.95)
         Bw = mis.evaluate(f.p, jacobian=True).B
         try:
@@ -291,4 +293,4 @@ def identify_replicates(analysis: Analysis, measured: np.ndarray, method: str | 
     if not est:
         return Replicates(P, S, C, J, ok, bound, list(base.parameters.names))
     return Replicates(P, S, C, J, ok, bound, list(base.parameters.names), [base.scales[k].name for k in est],
-                      K, lo, hi, edof, elim)
+                      K, lo, hi, edof, elim, dof)

@@ -76,6 +76,10 @@ def report_text(res) -> str:
                   + f" degrees of freedom (Satterthwaite), the 95 % ellipse d² < {rel.ellipse_limit(0.95):.3g} "
                     f"(n F(n, {rel.ellipse_dof:.3g}))."]
     lines += error_scale_lines(rel)
+    if rel.scales_estimated and res.weighting != "full":
+        lines += ["", f"(weighting '{res.weighting}': the error scales multiply the weighting's covariance "
+                      f"({'I, 1 m² per reading' if res.weighting == 'identity' else 'the diagonal of C_x'}), "
+                      "not the stated C_x.)"]
     strong = [(params.names[i], params.names[j], rel.correlation[i, j])
               for i in range(params.n) for j in range(i + 1, params.n)
               if np.isfinite(rel.correlation[i, j]) and abs(rel.correlation[i, j]) > 0.5]

@@ -68,6 +68,7 @@ from scipy import special
 
 KINDS = ("known", "free", "lognormal", "inverse-chi2")
 MIN_DOF = 1.0  # degrees of freedom an estimated scale without a prior needs after the parameters
+MIN_DOF_REPORTED = 1e-6  # below this a group has no readings left to judge its stated sigma
 LEVEL = 0.95
 
 
@@ -333,20 +334,24 @@ def factor_interval(g: ScaleGroup, J: float, c: float, u_hat: float, level: floa
     """Interval of k: J/phi ~ chi2(c) (no prior, or a known group's readings alone),
     (J + nu0)/phi ~ chi2(c + nu0) (inverse-chi2), quadrature of the posterior (log-normal)."""
     a = (1 - level) / 2
+
+    def root(x: float, q: float) -> float:
+        return math.sqrt(x / q) if q > 0 else math.inf
+
     if g.kind in ("known", "free"):
-        if c <= 0:
+        if not c > MIN_DOF_REPORTED:
             return float("nan"), float("nan")
-        return math.sqrt(J / chi2_ppf(1 - a, c)), math.sqrt(J / chi2_ppf(a, c))
+        return root(J, chi2_ppf(1 - a, c)), root(J, chi2_ppf(a, c))
     if g.kind == "inverse-chi2":
         d = c + g.nu0
-        return math.sqrt((J + g.nu0) / chi2_ppf(1 - a, d)), math.sqrt((J + g.nu0) / chi2_ppf(a, d))
+        return root(J + g.nu0, chi2_ppf(1 - a, d)), root(J + g.nu0, chi2_ppf(a, d))
     lo, hi = _log_posterior_interval(g, J, c, u_hat, level)
     return math.exp(lo / 2), math.exp(hi / 2)
 
 
 def stated_p(J: float, c: float) -> float:
     """Two-sided p of k = 1: J ~ chi2(c)."""
-    if c <= 0:
+    if not c > MIN_DOF_REPORTED:
         return float("nan")
     lower, upper = special.gammainc(c / 2, J / 2), special.gammaincc(c / 2, J / 2)
     return float(min(1.0, 2 * min(lower, upper)))
@@ -419,6 +424,8 @@ def group_estimates(state: ScaleState, h: np.ndarray, level: float = LEVEL) -> l
     for k, g in enumerate(state.groups):
         J = float(state.J[k])
         c = float(g.m - h[k])
+        if c < MIN_DOF_REPORTED:  # every reading taken up by the parameters (round-off included)
+            c = 0.0
         readings = math.sqrt(J / c) if c > 0 else float("nan")
         if g.estimated:
             u = g.profile(J, c) if (c > 0 or g.has_prior) else float("nan")
