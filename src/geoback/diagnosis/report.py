@@ -10,7 +10,7 @@ from ..outputs import write_atomic, write_json
 
 def _fit_line(chi2: float, dof: float, p: float) -> str:
     if not dof > 0:
-        return "every reading's error scale is estimated (no χ² test of stated σ's)"
+        return "no χ² test of stated σ's: every reading's error scale is estimated"
     shown = dof if isinstance(dof, (int, np.integer)) else f"{dof:.4g}"
     return f"χ² = {chi2:.4g} on {shown} dof (χ²/dof = {chi2 / dof if dof else float('nan'):.3g}, p = {p:.3g})"
 
