@@ -252,4 +252,52 @@ def physical_problems(case: Case, allow_large: bool = False) -> list[tuple[tuple
         if pnames.index(n) != i:
             problems.append((("parameters", i, "name"),
                              f"expected each parameter once, found '{n}' again (as in parameters[{pnames.index(n)}])"))
+    problems.extend(_error_scale_problems(case))
     return problems
+
+
+def _reading_count(ins) -> int:
+    """Number of readings an instrument gives (stations, point components, one chord)."""
+    if ins.kind == "points":
+        return len(ins.points) * len(ins.components)
+    if ins.kind == "convergence":
+        return 1
+    return _station_count(ins)[0]
+
+
+def _error_scale_problems(case: Case) -> list[tuple[tuple, str]]:
+    """error_scales: known instruments with readings, each in one group, group names unique, and
+    enough readings to estimate a scale that has no prior."""
+    out: list[tuple[tuple, str]] = []
+    by_name = {ins.name: ins for ins in case.instruments}
+    known = ", ".join(by_name) or "none"
+    seen: dict[str, int] = {}
+    names: dict[str, int] = {}
+    for i, entry in enumerate(case.error_scales):
+        at = ("error_scales", i)
+        for j, name in enumerate(entry.instruments):
+            ins = by_name.get(name)
+            if ins is None:
+                out.append((at + ("instruments", j), f"expected the name of an instrument of the case ({known}), "
+                                                     f"found '{name}'"))
+            elif name in seen:
+                out.append((at + ("instruments", j), f"expected each instrument in one error_scales entry, found "
+                                                     f"'{name}' again (as in error_scales[{seen[name]}])"))
+            elif ins.readings is None and ins.readings_file is None:
+                out.append((at + ("instruments", j), f"expected an instrument with readings (a scale is estimated "
+                                                     f"from them), found '{name}' without readings or readings_file"))
+            seen.setdefault(name, i)
+        group = entry.name or "+".join(entry.instruments)
+        clash = group in by_name and group not in entry.instruments
+        if group in names or clash:
+            out.append((at + ("name",) if entry.name else at + ("instruments",),
+                        f"expected a group name used once and not naming another instrument, found '{group}' "
+                        + (f"again (as in error_scales[{names[group]}])" if group in names else
+                           "(the name of an instrument outside the group)")))
+        names.setdefault(group, i)
+        if entry.scale == "estimate" and entry.prior is None:
+            count = sum(_reading_count(by_name[n]) for n in set(entry.instruments) if n in by_name)
+            if 0 < count < 2:
+                out.append((at + ("scale",), f"expected at least 2 readings to estimate a scale without a prior, "
+                                             f"found {count} (give it a prior, or scale: known)"))
+    return out

@@ -10,7 +10,7 @@ import re
 from typing import Annotated, Any, Literal, Optional, Union
 
 from pydantic import (BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, Tag,
-                      model_validator)
+                      field_validator, model_validator)
 
 from .yamlmarks import printable
 
@@ -250,6 +250,65 @@ class Prior(Strict):
     std: Positive
 
 
+_NAME = r"^[A-Za-z0-9_\-.]+$"
+
+
+class ScalePrior(Strict):
+    """What is known of the factor k = true sigma / stated sigma before the readings: the stated
+    sigma is right within a factor `within` with probability `level` (1/within <= k <= within)."""
+
+    shape: Literal["lognormal", "inverse-chi2"] = Field(
+        "lognormal", description="prior of k: 'lognormal' (ln k normal) or 'inverse-chi2' (k^2 scaled "
+                                 "inverse-chi-square, centred on 1; conjugate: the prior counts as `dof` readings)")
+    within: Optional[Annotated[float, BeforeValidator(_number)]] = Field(
+        None, description="the true sigma is within this factor of the stated one (a number above 1, e.g. 2)")
+    level: Annotated[float, BeforeValidator(_number), Field(gt=0, lt=1)] = Field(
+        0.95, description="prior probability of 1/within <= k <= within")
+    dof: Optional[Positive] = Field(None, description="inverse-chi2 only, instead of `within`: the stated sigma "
+                                                      "is worth this many readings")
+
+    @field_validator("within")
+    @classmethod
+    def _above_one(cls, v):
+        if v is not None and not v > 1:
+            raise ValueError(f"expected a factor greater than 1 (within: 1 would say the stated sigma is exact: "
+                             f"give the instruments scale: known), found {_g(v)}")
+        return v
+
+    @model_validator(mode="after")
+    def _one_width(self):
+        if self.dof is not None and self.shape != "inverse-chi2":
+            raise ValueError("expected 'within' for a lognormal prior ('dof' is for shape: inverse-chi2), found dof")
+        if (self.within is None) == (self.dof is None):
+            raise ValueError("expected the prior's width as 'within' (a factor above 1)"
+                             + (" or 'dof'" if self.shape == "inverse-chi2" else "")
+                             + (", found both" if self.within is not None else ", found neither"))
+        return self
+
+
+class ErrorScale(Strict):
+    """How well the stated sigma of some instruments is known (eqn 10: C_x,i = k^2 x the stated
+    C_x,i). The listed instruments share one factor k; instruments not listed keep their stated sigma
+    (k = 1). 'estimate' identifies k with the parameters (maximum likelihood of the full support
+    function, eqn 5, with the restricted correction for the parameters' degrees of freedom);
+    with a `prior`, k is estimated with that prior."""
+
+    name: Optional[str] = Field(None, pattern=_NAME,
+                                description="name of the group in reports (default: its instruments' names)")
+    instruments: list[Annotated[str, Field(pattern=_NAME)]] = Field(
+        min_length=1, description="names of the instruments sharing the factor k")
+    scale: Literal["known", "estimate"] = Field(
+        "estimate", description="'estimate': the stated sigma is right up to a factor k, estimated with the "
+                                "parameters; 'known': k = 1 (the default for instruments not listed)")
+    prior: Optional[ScalePrior] = Field(None, description="prior on k (scale: estimate only)")
+
+    @model_validator(mode="after")
+    def _prior_needs_estimate(self):
+        if self.prior is not None and self.scale == "known":
+            raise ValueError("expected no prior for a known scale (scale: estimate to give k a prior), found a prior")
+        return self
+
+
 class Parameter(Strict):
     """A quantity to identify: 'E[layer]', 'nu[layer]', 'K0', 'K0[layer]', 'B[instrument]', ..."""
 
@@ -282,6 +341,9 @@ class Case(Strict):
     ground: Ground
     mesh: MeshSettings = MeshSettings()
     instruments: list[Instrument] = Field(default_factory=list)
+    error_scales: list[ErrorScale] = Field(
+        default_factory=list, description="instruments whose stated sigma is known only up to a factor "
+                                          "(estimated with the parameters); the others' sigma is taken as exact")
     parameters: list[Parameter] = Field(default_factory=list)
     fit: FitSettings = FitSettings()
     output: Output = Output()

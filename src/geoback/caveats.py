@@ -14,6 +14,7 @@ and a sentence that says what was found and what to check. Codes:
 | `implausible-value` | an estimate outside the usual range for ground |
 | `implausible-input` | a value of the case outside the usual range (a unit slip?) |
 | `exactly-determined` | as many readings as parameters: χ² cannot test the model |
+| `error-scale` | an estimated error scale beyond what the case allows for it (its prior, or the other instruments) |
 """
 from __future__ import annotations
 
@@ -57,6 +58,9 @@ def fit_caveats(fit, rel, params, limits, profiled: dict) -> list[Caveat]:
                           f"the model does not explain the readings within their stated errors: chi-square/dof = "
                           f"{rel.reduced_chi2:.3g} (p = {rel.p_value:.2g}); check the readings (order, signs, units, "
                           f"reference end) and their stated sigma, then run `geoback diagnose`"))
+    for e in getattr(rel, "error_scales", ()):
+        if e.estimated and e.p_allowed < ALPHA:
+            out.append(Caveat("error-scale", e.text + "; try `geoback diagnose`", e.name))
     for combo in rel.undetermined:
         out.append(Caveat("not-determined", f"the readings cannot determine {combo} (standard deviations of the "
                                             f"parameters involved are infinite)"))

@@ -7,10 +7,17 @@ scale the initial magnitude, so that the paper's mu0 = 10 means the same whateve
 'gn' uses mu = 0 (eqn 28) with step halving. mu is multiplied by 10 when J rises and divided by
 10 when it falls; a step is accepted only if J decreases. The internal coordinates never leave
 this module: the misfit is evaluated in physical units.
+
+The optimiser knows nothing of error scales: a misfit that estimates them reports its profiled
+objective as J (which may be negative, hence the relative tests on |J|) with re-weighted r and B
+whose -2 B^t r is its gradient. A misfit whose objective depends on where its optimum is (the
+scales' restricted degrees of freedom, ``Misfit.anchored``) is refitted from the optimum until
+that stops changing; for every other misfit ``anchored`` returns the misfit itself and the fit is
+a single run of the loop.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -18,6 +25,7 @@ from .misfit import Misfit
 from .parameters import ParameterSet
 
 MAX_TRIALS = 12  # trial steps per iteration (mu x10 or step halving each time)
+MAX_SETTLE = 8  # refits from the optimum while the misfit's anchored settings change
 METHODS = ("lm", "gn", "lm-scaled")
 
 
@@ -98,6 +106,25 @@ def _solve_step(N: np.ndarray, g: np.ndarray, damping: np.ndarray) -> np.ndarray
 def fit(misfit: Misfit, settings: Settings = Settings(), method: str | None = None, p0: np.ndarray | None = None,
         max_iterations: int | None = None, progress=None) -> Fit:
     """Identify the misfit's parameters (eqns 27-30); never raises on non-convergence."""
+    result = _iterate(misfit, settings, method, p0, max_iterations, progress)
+    for _ in range(MAX_SETTLE):
+        settled = misfit.anchored(result.p)
+        if settled is misfit:
+            break
+        misfit = settled  # near the optimum already: restart with the damping the last round ended with
+        mu = [h.mu for h in result.history if h.accepted][-1]
+        warm = replace(settings, mu0=max(mu, 1e-12 * settings.mu0))
+        shown = (lambda it, k0=result.iterations: progress(replace(it, k=it.k + k0))) if progress else None
+        again = _iterate(misfit, warm, method, result.p, max_iterations, shown)
+        again.history = result.history + [replace(h, k=h.k + result.iterations) for h in again.history]
+        again.iterations += result.iterations
+        again.moved = again.moved or result.moved
+        result = again
+    return result
+
+
+def _iterate(misfit: Misfit, settings: Settings, method: str | None, p0: np.ndarray | None,
+             max_iterations: int | None, progress) -> Fit:
     method = method or settings.method
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, not '{method}'")
@@ -127,7 +154,7 @@ def fit(misfit: Misfit, settings: Settings = Settings(), method: str | None = No
         N, g = B.T @ B, B.T @ ev.r
         step = _solve_step(N, g, damping(N))
         predicted = 2 * g @ step - step @ N @ step  # decrease of J predicted by the linear model
-        if predicted <= settings.objective_tol * J:
+        if predicted <= settings.objective_tol * abs(J):
             k -= 1
             status, reason = "converged", f"predicted decrease of J ({predicted:.1e}) below tolerance"
             moved = True  # at the minimum already: nowhere to move
@@ -156,7 +183,7 @@ def fit(misfit: Misfit, settings: Settings = Settings(), method: str | None = No
             break
         moved = True
         dz = z_new - z
-        dJ = (J - J_new) / max(J, 1e-300)
+        dJ = (J - J_new) / max(abs(J), 1e-300)
         z, J = z_new, J_new
         if method != "gn":
             mu /= 10

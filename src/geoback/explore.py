@@ -200,6 +200,8 @@ def explore(misfit: Misfit, result: Identification, what=WHAT, settings: Setting
         misfit = misfit.with_weighting(result.weighting)
     sim = misfit.simulation
     before, t0 = sim.counters.snapshot(), time.perf_counter()
+    if misfit.free and ("other" in what or "slice" in what):  # estimated error scales: the objective of the result
+        misfit = misfit.anchored(result.fit.p)
     other, note = None, ""
     if "other" in what:
         method = other_method(result.fit.method)

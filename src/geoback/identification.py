@@ -24,6 +24,7 @@ from .parameters import ParameterSet, parameter_limits, resolve
 from .readings import measured_values, survey_blocks
 from .caveats import fit_caveats, status_words
 from .reliability import Reliability, assess
+from .scales import groups_of
 from .simulation import Prediction, Simulation, is_constant, make_simulation
 
 
@@ -66,9 +67,10 @@ class Analysis:
         if self.misfit is not None and weighting in (None, self.misfit.weighting):
             return replace(self, misfit=self.misfit.with_measured(measured))
         identified = {n for n in self.parameters.names if is_constant(n)}
-        data = Data.build(self.simulation.survey.blocks, np.asarray(measured, float), identified)
+        blocks = self.simulation.survey.blocks
+        data = Data.build(blocks, np.asarray(measured, float), identified)
         return replace(self, misfit=Misfit(self.simulation, data, self.parameters, self.base_values,
-                                           weighting or self.case.fit.weighting))
+                                           weighting or self.case.fit.weighting, groups_of(self.case, blocks)))
 
 
 def prepare(loaded: LoadedCase, mesh=None, backend: str | None = None, parameters=None,
@@ -99,7 +101,8 @@ def prepare(loaded: LoadedCase, mesh=None, backend: str | None = None, parameter
         if measured is not None:
             identified = {n for n in params.names if is_constant(n)}
             data = Data.build(simulation.survey.blocks, measured, identified)
-            misfit = Misfit(simulation, data, params, base, weighting or case.fit.weighting)
+            misfit = Misfit(simulation, data, params, base, weighting or case.fit.weighting,
+                            groups_of(case, simulation.survey.blocks))
     return Analysis(loaded, simulation, params, base, misfit, Settings.of(case.fit), tuple(notices))
 
 
@@ -258,6 +261,7 @@ def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, se
     """The frozen result of a fit: its reliability (eqns 43-55), profile-likelihood intervals where
     the linearised ones are not reliable (profile 'auto'; 'all' or 'none'; needs `settings`), what
     not to trust (caveats, with the input `notices`) and the data it was fitted to."""
+    misfit = misfit.anchored(result.p)  # estimated error scales: restricted dof at the optimum
     rel = assess(misfit.evaluate(result.p, jacobian=True), misfit.parameters, misfit.logdet)
     full = misfit if misfit.weighting == "full" else misfit.with_weighting("full")
     standardised = full.whiten(misfit.data.measured - result.x)
@@ -326,6 +330,31 @@ class Replicates:
     converged: np.ndarray  # (N,) bool
     at_bound: np.ndarray  # (N, n) bool
     names: list[str]
+    # estimated error scales (None when every scale is known): k per group and its interval,
+    # and the denominator dof of each replicate's parameter ellipse (Reliability.ellipse_limit)
+    scale_names: list[str] | None = None
+    scales: np.ndarray | None = None  # (N, G)
+    scale_low: np.ndarray | None = None
+    scale_high: np.ndarray | None = None
+    ellipse_dof: np.ndarray | None = None  # (N,)
+    ellipse_limit: np.ndarray | None = None  # (N,) 95 % limit of d^2
+    scale_dof: np.ndarray | None = None  # (N, G) restricted dof c_g = m_g - h_g of each estimated scale
+
+    def inside(self, truth: np.ndarray, level: float = 0.95) -> np.ndarray:
+        """Is `truth` inside each replicate's `level` ellipse (F ellipse when scales are estimated)?"""
+        from scipy import special
+
+        from .scales import chi2_ppf
+
+        e = self.p - np.asarray(truth, float)
+        d2 = np.einsum("ki,ki->k", e, np.linalg.solve(self.covariance, e[..., None])[..., 0])
+        n = self.p.shape[1]
+        if self.ellipse_dof is None:
+            return d2 < chi2_ppf(level, n)
+        finite = np.isfinite(self.ellipse_dof)
+        limit = np.where(finite, n * special.fdtri(n, np.where(finite, self.ellipse_dof, 1.0), level),
+                         chi2_ppf(level, n))
+        return d2 < limit
 
 
 def identify_replicates(analysis: Analysis, measured: np.ndarray, method: str | None = None,
@@ -340,11 +369,22 @@ def identify_replicates(analysis: Analysis, measured: np.ndarray, method: str | 
     N = len(measured)
     P, S, C, J = np.empty((N, n)), np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
     ok, bound = np.zeros(N, bool), np.zeros((N, n), bool)
+    est = [k for k, g in enumerate(base.scales) if g.estimated]
+    K, lo, hi, dof = (np.full((N, len(est)), np.nan) for _ in range(4))
+    edof, elim = np.full(N, np.inf), np.full(N, np.nan)
     # thousands of tiny dense solves: BLAS threads only add start-up cost (and spin on a busy machine)
     with threadpool_limits(limits=1, user_api="blas"):
         for i, x in enumerate(measured):
             mis = base.with_measured(x)
             f = fit(mis, analysis.settings, method=method, p0=p0)
+            if est:  # the scales estimated at this replicate's optimum, C_p with them, the F ellipse
+                mis = mis.anchored(f.p)
+                rel = assess(mis.evaluate(f.p, jacobian=True), mis.parameters, mis.logdet)
+                K[i] = [rel.error_scales[k].factor for k in est]
+                lo[i] = [rel.error_scales[k].low for k in est]
+                hi[i] = [rel.error_scales[k].high for k in est]
+                dof[i] = [rel.error_scales[k].dof for k in est]
+                edof[i], elim[i] = rel.ellipse_dof, rel.ellipse_limit(0.95)
             Bw = mis.evaluate(f.p, jacobian=True).B
             try:
                 cov = np.linalg.inv(Bw.T @ Bw)  # C_p = (A'^t A' + C_p0^-1)^-1, eqn 55
@@ -352,4 +392,7 @@ def identify_replicates(analysis: Analysis, measured: np.ndarray, method: str | 
                 cov = np.full((n, n), np.inf)
             P[i], C[i], S[i], J[i] = f.p, cov, np.sqrt(np.clip(np.diag(cov), 0, None)), f.J
             ok[i], bound[i] = f.status == "converged", f.at_bound
-    return Replicates(P, S, C, J, ok, bound, list(base.parameters.names))
+    if not est:
+        return Replicates(P, S, C, J, ok, bound, list(base.parameters.names))
+    return Replicates(P, S, C, J, ok, bound, list(base.parameters.names), [base.scales[k].name for k in est],
+                      K, lo, hi, edof, elim, dof)

@@ -7,6 +7,14 @@ blockdiag(C_x,i) over instruments (eqn 9); ``Misfit`` adds a simulation and the 
 the only place where anything is whitened: an ``Evaluation`` carries the whitened residual
 r' = L^-1 (x* - x) and sensitivity A' = L^-1 A, with the prior rows appended, in physical units.
 The optimiser, the reliability measures and `diagnose` see nothing but this object.
+
+Error scales (eqns 5 and 10, ``scales.py``): where the case says an instrument's sigma is known
+only up to a factor k, the misfit profiles k^2 in closed form at every p and re-weights: the
+residual and sensitivity rows of a group are whitened by its estimated scale, and the objective
+is S*(p) (the support function with the scales profiled out, equal to J when every k is 1) instead
+of r^t r; its gradient is still -2 B^t r, so the optimiser needs no change and no new solves. The
+restricted degrees of freedom c_g the profile uses are taken at the optimum (``anchored``).
+A misfit without estimated scales takes exactly the code path it always took.
 """
 from __future__ import annotations
 
@@ -17,6 +25,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from . import covariance as cov
+from . import scales as sc
 from .errors import GeobackError
 from .instruments import InstrumentBlock, Reading
 from .parameters import ParameterSet, resolve
@@ -87,7 +96,10 @@ def weighting_factor(data: Data, weighting: str) -> np.ndarray:
 class Evaluation:
     """The misfit at p: computed readings x, their sensitivity A (physical units, None unless
     asked), and the residual vector r = [L^-1 (x* - x); sqrt(C_p0^-1) (p0 - p)] with its Jacobian
-    B = -dr/dp = [L^-1 A; sqrt(C_p0^-1)] (rows of parameters with a prior only). J = r^t r."""
+    B = -dr/dp = [L^-1 A; sqrt(C_p0^-1)] (rows of parameters with a prior only). J = r^t r.
+
+    With estimated error scales the data rows are whitened by the estimated scales as well and J
+    is the profiled objective S* (``objective``; see scales.py), whose gradient is still -2 B^t r."""
 
     p: np.ndarray
     x: np.ndarray
@@ -95,10 +107,29 @@ class Evaluation:
     r: np.ndarray
     B: np.ndarray | None
     m: int  # data rows of r (the rest are prior rows)
+    objective: float | None = None  # S*(p) when error scales are estimated
+    scales: sc.ScaleState | None = None  # the scales profiled at p (None: every scale known)
+    groups: tuple = ()  # the misfit's scale groups (one known group per instrument by default)
 
     @property
     def J(self) -> float:
-        return float(self.r @ self.r)
+        return float(self.r @ self.r) if self.objective is None else self.objective
+
+    @property
+    def support(self) -> float:
+        """-2 ln L minus its constants (ln|C_x stated| + m ln 2 pi), maximised over the scales by
+        maximum likelihood (c_g = m_g): J itself when every scale is known. For likelihood ratios."""
+        if self.scales is None:
+            return self.J
+        prior = self.r[self.m:]
+        return self.scales.support + float(prior @ prior)
+
+    @property
+    def stated_residual(self) -> np.ndarray:
+        """The data residual whitened by the stated C_x (whatever the scales)."""
+        if self.scales is None:
+            return self.r[:self.m]
+        return self.r[:self.m] * np.exp(self.scales.row_u / 2)
 
     @property
     def J_data(self) -> float:
@@ -122,7 +153,8 @@ class Misfit:
     """
 
     def __init__(self, simulation: Simulation, data: Data, parameters: ParameterSet, values: Mapping,
-                 weighting: str = "full"):
+                 weighting: str = "full", scales: Sequence[sc.ScaleGroup] | None = None,
+                 scale_dof: np.ndarray | None = None):
         if data.measured is None:
             raise GeobackError("the case has instruments without readings: give 'readings' or 'readings_file' "
                                "for every instrument to identify parameters")
@@ -140,6 +172,11 @@ class Misfit:
         self._prior_rows = np.zeros((len(self._prior_index), parameters.n))
         self._prior_rows[np.arange(len(self._prior_index)), self._prior_index] = self._prior_sqrt
         self._held = np.zeros(0)  # prior rows of parameters held fixed (profiles): constant terms of J
+        # error scales (eqn 10): groups of readings sharing a factor k on their stated sigma
+        self.scales = tuple(scales) if scales else sc.default_groups(data.blocks)
+        self.free = any(g.estimated for g in self.scales)
+        self.scale_dof = (np.asarray(scale_dof, float) if scale_dof is not None
+                          else sc.initial_dof(self.scales, parameters.n))
 
     # ------------------------------------------------------------------ the one place that whitens
     def whiten(self, v: np.ndarray) -> np.ndarray:
@@ -174,13 +211,92 @@ class Misfit:
         p = np.asarray(p, float)
         pred = self.simulation.predict(self.values(p), self.parameters.names, sensitivities=jacobian)
         prior_r = self._prior_sqrt * (self.parameters.prior_mean[self._prior_index] - p[self._prior_index])
-        r = np.concatenate([self.whiten(self.data.measured - pred.x), prior_r, self._held])
-        B = np.vstack([self.whiten(pred.A), self._prior_rows, np.zeros((len(self._held), self.n))]) \
-            if jacobian else None
-        return Evaluation(p, pred.x, pred.A, r, B, self.m)
+        prior_r = np.concatenate([prior_r, self._held])  # held parameters' priors: constant rows
+        prior_rows = self._prior_rows if not len(self._held) else \
+            np.vstack([self._prior_rows, np.zeros((len(self._held), self.n))])
+        if not self.free:
+            r = np.concatenate([self.whiten(self.data.measured - pred.x), prior_r])
+            B = np.vstack([self.whiten(pred.A), prior_rows]) if jacobian else None
+            return Evaluation(p, pred.x, pred.A, r, B, self.m, groups=self.scales)
+        # error scales profiled at p (closed form), each group's rows re-weighted by its scale
+        rw = self.whiten(self.data.measured - pred.x)
+        state = sc.profile_state(self.scales, rw, self.scale_dof)
+        w = np.exp(-state.row_u / 2)
+        r = np.concatenate([rw * w, prior_r])
+        B = np.vstack([self.whiten(pred.A) * w[:, None], prior_rows]) if jacobian else None
+        return Evaluation(p, pred.x, pred.A, r, B, self.m, state.objective + float(prior_r @ prior_r), state,
+                          self.scales)
 
     def J(self, p: np.ndarray) -> float:
         return self.evaluate(p).J
+
+    # ------------------------------------------------------------------ error scales
+    def anchored(self, p: np.ndarray, rtol: float = 1e-6) -> "Misfit":
+        """The misfit with the error scales' restricted degrees of freedom c_g = m_g - h_g taken at
+        p (h_g: the group's leverage with the scales estimated there; a fixed point, computed
+        without solves from the sensitivity at p). Returns itself when nothing is estimated or
+        when its c already agrees within rtol: the optimiser refits until it does."""
+        if not self.free:
+            return self
+        c = self._restricted_dof(np.asarray(p, float))
+        if np.max(np.abs(c - self.scale_dof)) <= rtol * max(1.0, float(np.max(c))):
+            return self
+        return self.with_scale_dof(c)
+
+    def _restricted_dof(self, p: np.ndarray) -> np.ndarray:
+        ev = self.evaluate(p, jacobian=True)
+        back = np.exp(ev.scales.row_u / 2)
+        rw, As = ev.r[:self.m] * back, ev.B[:self.m] * back[:, None]  # whitened by the stated C_x
+        m_g = np.array([g.m for g in self.scales], float)
+        c = self.scale_dof.copy()
+        for _ in range(200):
+            state = sc.profile_state(self.scales, rw, np.maximum(c, 1e-9))
+            w = np.exp(-state.row_u / 2)
+            h = sc.leverage_by_group(self.scales, np.vstack([As * w[:, None], self._prior_rows]), self.m)
+            c_new = m_g - h
+            done = np.max(np.abs(c_new - c)) <= 1e-12 * max(1.0, float(np.max(m_g)))
+            c = c_new
+            if done:
+                break
+        for k, g in enumerate(self.scales):
+            if g.kind == "free" and c[k] < sc.MIN_DOF:
+                raise self._scale_error(g, f"expected readings left over by the parameters to estimate the scale of "
+                                           f"'{g.name}', found {g.m} reading{'s' if g.m != 1 else ''} of which the "
+                                           f"parameters take up {g.m - c[k]:.2g} (at least {sc.MIN_DOF:g} must "
+                                           f"remain): give it a prior, group it with another instrument or make it known")
+        return c
+
+    def _scale_error(self, group, message: str) -> GeobackError:
+        loaded = getattr(self.simulation, "loaded", None)
+        if loaded is not None and group.at is not None and hasattr(loaded, "error"):
+            return loaded.error(group.at, message)
+        return GeobackError(f"error scale '{group.name}': {message}")
+
+    def with_scale_dof(self, c: np.ndarray) -> "Misfit":
+        new = object.__new__(Misfit)
+        new.__dict__.update(self.__dict__)
+        new.scale_dof = np.asarray(c, float).copy()
+        return new
+
+    def scales_at(self, p: np.ndarray) -> np.ndarray | None:
+        """The estimated log variance factor u = ln k^2 of every reading at p (restricted dof taken
+        at p); None when every scale is known."""
+        if not self.free:
+            return None
+        return self.anchored(p).evaluate(p).scales.row_u
+
+    def with_fixed_scales(self, row_u: np.ndarray | None) -> "Misfit":
+        """A misfit whose readings' covariance is the stated one times e^u per reading, every scale
+        known: `diagnose` scores hypotheses with the scales held at their estimates under the null."""
+        if row_u is None:
+            return self
+        new = object.__new__(Misfit)
+        new.__dict__.update(self.__dict__)
+        new.L = self.L * np.exp(np.asarray(row_u, float) / 2)[:, None]
+        new.logdet = self.logdet + float(np.sum(row_u))
+        new.scales = tuple(replace(g, kind="known") for g in self.scales)
+        new.free = False
+        return new
 
     # ------------------------------------------------------------------ derived misfits
     def with_measured(self, measured: np.ndarray) -> "Misfit":
@@ -200,14 +316,14 @@ class Misfit:
                            [params.units[i] for i in keep])
         base = dict(self.base_values)
         base[params.names[index]] = float(value)
-        new = Misfit(self.simulation, self.data, sub, base, self.weighting)
+        new = Misfit(self.simulation, self.data, sub, base, self.weighting, self.scales)
         held = [] if not params.has_prior[index] else \
             [(params.prior_mean[index] - value) / params.prior_std[index]]
         new._held = np.concatenate([self._held, held])
         return new
 
     def with_weighting(self, weighting: str) -> "Misfit":
-        return Misfit(self.simulation, self.data, self.parameters, self.base_values, weighting)
+        return Misfit(self.simulation, self.data, self.parameters, self.base_values, weighting, self.scales)
 
     def extended(self, specs: Sequence, values: Mapping | None = None, simulation: Simulation | None = None,
                  start: np.ndarray | None = None) -> "Misfit":
@@ -223,4 +339,4 @@ class Misfit:
         data = self.data
         if constants != {n for n in self.parameters.names if is_constant(n)}:
             data = Data.build(self.data.blocks, self.data.measured, constants)
-        return Misfit(simulation, data, params, base, self.weighting)
+        return Misfit(simulation, data, params, base, self.weighting, self.scales)

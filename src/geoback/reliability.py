@@ -4,15 +4,25 @@ With C_x = L L^t and A' = L^-1 A: C_p = (A'^t A' + C_p0^-1)^-1 (eqn 55), Q = A' 
 (information density; symmetric, idempotent without priors, trace = n), the SVD A' = U S V^t
 (eqns 44-49) on relative parameter changes dp/p, chi^2 = J_min on m - n degrees of freedom,
 and -2 ln L (eqn 5) for AIC and BIC.
+
+Error scales (scales.py): every instrument (or group) gets the scale its readings suggest, with
+an interval and the test of its stated sigma. Where scales are estimated, A' and r' are whitened
+by them (C_p with the estimated scales), the chi^2 test covers the readings whose sigma is known
+(and the priors) on Satterthwaite's degrees of freedom, -2 ln L is the support function (eqn 5)
+maximised over the scales, AIC/BIC count them, and the parameters' intervals and ellipse use
+Student t / F quantiles on the Satterthwaite degrees of freedom that the scales' uncertainty leaves.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import math
 
 import numpy as np
 
+from . import scales as sc
+
+Z95 = 1.959963984540054  # standard normal quantile at 0.975
 ILL_CONDITIONED = 1e-8  # smallest / largest singular value below which a combination is undetermined
 
 
@@ -36,16 +46,32 @@ class Reliability:
     aic: float
     bic: float
     undetermined: list[str]  # plain-words description of combinations the readings cannot fix
+    error_scales: list = field(default_factory=list)  # scales.ScaleEstimate per group of readings
+    parameter_dof: np.ndarray | None = None  # Satterthwaite dof of each std (None: every scale known)
+    ellipse_dof: float = float("inf")  # denominator dof of the parameters' F ellipse
+    total_dof: float = 0  # readings + priors - parameters
+    stated_residual: np.ndarray | None = None  # L^-1 (x* - x) with the stated C_x
+    stated_J: float = float("nan")  # J with every scale at 1 (data and priors)
     log: np.ndarray | None = None  # parameters identified as ln p: their intervals are made in log space
 
     @property
     def reduced_chi2(self) -> float:
         return self.chi2 / self.dof if self.dof > 0 else float("nan")
 
+    @property
+    def scales_estimated(self) -> bool:
+        return any(e.estimated for e in self.error_scales)
+
     def interval95(self) -> tuple[np.ndarray, np.ndarray]:
-        """Linearised 95 % intervals: p +- 1.96 std, or for a log-transformed parameter
-        exp(ln p +- 1.96 std / p) (the same linearisation made where the fit works)."""
-        z = Z95
+        """Linearised 95 % intervals: p +- z std (z the normal quantile, or Student t's on the
+        Satterthwaite dof the estimated error scales leave), for a log-transformed parameter
+        exp(ln p +- z std / p) (the same linearisation made where the fit works)."""
+        z = np.full(len(self.p), Z95)
+        if self.parameter_dof is not None:  # Student t on the dof the estimated scales leave
+            from scipy import special
+
+            nu = self.parameter_dof
+            z = np.where(np.isfinite(nu), special.stdtrit(np.where(np.isfinite(nu), nu, 1.0), 0.975), z)
         lo, hi = self.p - z * self.std, self.p + z * self.std
         if self.log is not None and np.any(self.log):
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -54,11 +80,18 @@ class Reliability:
             hi = np.where(self.log, self.p * f, hi)
         return lo, hi
 
+    def ellipse_limit(self, level: float = 0.95) -> float:
+        """d^2 = (p - p_hat)^t C_p^-1 (p - p_hat) below which p is inside the `level` ellipse:
+        chi2(n) quantile, or n F(n, nu) with nu = ellipse_dof when scales are estimated."""
+        n = len(self.p)
+        if np.isfinite(self.ellipse_dof):
+            from scipy import special
 
-Z95 = 1.959963984540054  # standard normal quantile at 0.975
+            return float(n * special.fdtri(n, self.ellipse_dof, level))
+        return sc.chi2_ppf(level, n)
 
 
-def chi2_sf(x: float, dof: int) -> float:
+def chi2_sf(x: float, dof: float) -> float:
     """P(chi^2_dof > x) = Q(dof/2, x/2), the regularised upper incomplete gamma function.
 
     Series for x < a + 1, Lentz's continued fraction otherwise (Numerical Recipes, 6.2), to
@@ -146,6 +179,62 @@ def assess(ev, params, logdet: float) -> Reliability:
     dof = m - n + int(np.count_nonzero(prec))
     pval = chi2_sf(chi2, dof)
     m2logL = chi2 + logdet + m * np.log(2 * np.pi)
-    return Reliability(list(names), p, Cp, std, corr, s, Vt.T, cond, Q, np.diag(Q).copy(), rw.copy(), chi2, dof,
-                       pval, float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined,
-                       np.asarray(params.log, bool))
+    groups = tuple(getattr(ev, "groups", ()) or ())
+    state = getattr(ev, "scales", None)
+    leverage = np.diag(Q).copy()
+    if state is None:
+        rel = Reliability(list(names), p, Cp, std, corr, s, Vt.T, cond, Q, leverage, rw.copy(), chi2, dof,
+                          pval, float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined,
+                          log=np.asarray(params.log, bool))
+        rel.total_dof, rel.stated_residual, rel.stated_J = dof, rel.whitened_residual, chi2
+        if groups:  # what each instrument's readings say about its stated sigma
+            known = sc.profile_state(groups, rw, np.zeros(len(groups)))
+            rel.error_scales = sc.group_estimates(known, sc_leverage(groups, leverage))
+        return rel
+    return _assess_with_scales(ev, params, logdet, groups, state, names, p, Cp, std, corr, s, Vt.T, cond, Q,
+                               leverage, aug, Cs, scale, tiny, undetermined, dof)
+
+
+def sc_leverage(groups, leverage: np.ndarray) -> np.ndarray:
+    return np.array([float(leverage[g.rows].sum()) for g in groups])
+
+
+def _assess_with_scales(ev, params, logdet, groups, state, names, p, Cp, std, corr, s, V, cond, Q, leverage, aug, Cs,
+                        scale, tiny, undetermined, total_dof) -> Reliability:
+    """The reliability measures when error scales are estimated (see the module docstring)."""
+    m, n = ev.m, len(p)
+    rw = ev.whitened_residual
+    h = sc_leverage(groups, leverage)
+    estimates = sc.group_estimates(state, h)
+    # chi^2 of the readings whose sigma is known, and of the priors, on Satterthwaite's dof:
+    # sum r_i^2 over rows R ~ sum of lambda chi2(1), lambda the eigenvalues of (I - Q_full)_RR
+    known_rows = np.concatenate([g.rows for g in groups if not g.estimated] or [np.zeros(0, int)]).astype(int)
+    prior_rows = m + np.flatnonzero(params.prior_precision() > 0)
+    rows = np.concatenate([known_rows, prior_rows]).astype(int)
+    prior_r = ev.r[m:]
+    chi2 = float(rw[known_rows] @ rw[known_rows] + prior_r @ prior_r)
+    if len(rows):
+        full = aug @ Cs @ aug.T  # Q over readings and prior rows (relative parameter scaling cancels)
+        M = np.eye(len(rows)) - full[np.ix_(rows, rows)]
+        t1, t2 = float(np.trace(M)), float(np.sum(M * M))
+        dof = t1
+        pval = chi2_sf(chi2 * t1 / t2, t1 * t1 / t2) if t1 > 1e-9 else float("nan")
+    else:
+        dof, pval = 0.0, float("nan")
+    # -2 ln L: the support function (eqn 5) maximised over the scales (maximum-likelihood profile)
+    n_scales = sum(1 for g in groups if g.estimated)
+    m2logL = ev.support + logdet + m * np.log(2 * np.pi)  # support includes m_g u_g and the scales' priors
+    # the parameters' dof: Satterthwaite on the estimated scales' uncertainty (var u_g = 2 / nu_g)
+    B = ev.whitened_sensitivity
+    infos = sc.group_information(groups, B)
+    nus = np.array([g.information(u, J) if g.estimated else np.inf for g, u, J in zip(groups, state.u, state.J)])
+    pdof = sc.satterthwaite_dof(Cp, infos, nus) if not tiny.any() else np.full(n, np.inf)
+    edof = sc.ellipse_dof(h, nus, n)
+    stated = ev.stated_residual
+    k = n + n_scales
+    rel = Reliability(list(names), p, Cp, std, corr, s, V, cond, Q, leverage, rw.copy(), chi2, dof, pval,
+                      float(m2logL), float(m2logL + 2 * k), float(m2logL + k * np.log(m)), undetermined,
+                      estimates, pdof, edof, total_dof, stated, float(stated @ stated + prior_r @ prior_r),
+                      log=np.asarray(params.log, bool))
+    return rel
+

@@ -42,11 +42,17 @@ def summary(res, exploration=None) -> dict:
         "J": f.J, "chi2": rel.chi2, "dof": rel.dof, "reduced_chi2": rel.reduced_chi2, "p_value": rel.p_value,
         "minus_2_log_likelihood": rel.minus2logL, "aic": rel.aic, "bic": rel.bic,
         "condition_number": rel.condition, "undetermined": rel.undetermined,
+        "error_scales": [e.as_dict() for e in rel.error_scales],
         "readings": res.data.m, "dofs": res.dofs, "elements": res.elements,
         **res.counts, "solver": res.solver,
         "timings_s": {k: round(v, 4) for k, v in res.seconds.items()},
         "platform": platform.platform(),
     }
+    if rel.parameter_dof is not None:  # estimated error scales: t intervals and the F ellipse
+        for i, n in enumerate(params.names):
+            out["parameters"][n]["dof"] = rel.parameter_dof[i]
+        out["ellipse_dof"] = rel.ellipse_dof
+        out["ellipse_limit_95"] = rel.ellipse_limit(0.95)
     if exploration is not None:  # the work of the field file and figures, apart from the identification's
         out["exploration"] = {k: exploration.counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}
         out["timings_s"]["exploration"] = round(exploration.seconds, 4)
@@ -69,8 +75,7 @@ def report_text(res) -> str:
               f"- method: {f.method}, {f.iterations} iterations, {res.counts['factorisations']} factorisation(s), "
               f"{res.counts['solves']} solves",
               f"- readings m = {res.data.m}, parameters n = {params.n}, dofs = {res.dofs}",
-              f"- chi-square = {rel.chi2:.6g}, dof = {rel.dof}, reduced chi-square = {rel.reduced_chi2:.4g}, "
-              f"p-value = {rel.p_value:.3g}",
+              chi2_line(rel),
               f"- AIC = {rel.aic:.6g}, BIC = {rel.bic:.6g}, condition number = {rel.condition:.3g}", "",
               "| parameter | unit | initial | estimate | std | 95 % interval |", "|---|---|---|---|---|---|"]
     lo, hi = res.intervals95()
@@ -83,6 +88,16 @@ def report_text(res) -> str:
                 f"≥ its bound {hi[i]:.6g}" if hi_open else f"{hi[i]:.6g}")
         lines.append(f"| {n} | {params.units[i]} | {params.initial[i]:.6g} | {f.p[i]:.6g}{bound} | "
                      f"{rel.std[i]:.3g}{_cv(f.p[i], rel.std[i])} | [{ends[0]}, {ends[1]}]{how} |")
+    if rel.parameter_dof is not None:
+        lines += ["", "The error scales are estimated: the intervals are Student t on "
+                  + ", ".join(f"{n} {d:.3g}" for n, d in zip(params.names, rel.parameter_dof))
+                  + f" degrees of freedom (Satterthwaite), the 95 % ellipse d² < {rel.ellipse_limit(0.95):.3g} "
+                    f"(n F(n, {rel.ellipse_dof:.3g}))."]
+    lines += error_scale_lines(rel)
+    if rel.scales_estimated and res.weighting != "full":
+        lines += ["", f"(weighting '{res.weighting}': the error scales multiply the weighting's covariance "
+                      f"({'I, 1 m² per reading' if res.weighting == 'identity' else 'the diagonal of C_x'}), "
+                      "not the stated C_x.)"]
     strong = [(params.names[i], params.names[j], rel.correlation[i, j])
               for i in range(params.n) for j in range(i + 1, params.n)
               if np.isfinite(rel.correlation[i, j]) and abs(rel.correlation[i, j]) > 0.5]
@@ -92,6 +107,40 @@ def report_text(res) -> str:
     lines += ["", "Most informative readings (leverage = diag Q): " +
               ", ".join(f"{reading_label(res.data.labels[i])} ({rel.leverage[i]:.2f})" for i in top)]
     return "\n".join(lines) + "\n"
+
+
+def chi2_line(rel) -> str:
+    if not rel.scales_estimated:
+        return (f"- chi-square = {rel.chi2:.6g}, dof = {rel.dof}, reduced chi-square = {rel.reduced_chi2:.4g}, "
+                f"p-value = {rel.p_value:.3g}")
+    if rel.dof <= 0:
+        return "- chi-square: every reading's scale is estimated, so no χ² test of the stated σ's (see the error scales)"
+    return (f"- chi-square of the readings whose σ is known (and of the priors) = {rel.chi2:.6g}, dof = {rel.dof:.4g}, "
+            f"reduced chi-square = {rel.reduced_chi2:.4g}, p-value = {rel.p_value:.3g} (Satterthwaite)")
+
+
+ERROR_SCALE_HEADER = ["group", "instruments", "treatment", "readings", "dof", "k", "k_low95", "k_high95",
+                      "k_readings", "p_stated", "p_allowed", "allowed_test", "ratio_to_others", "J_stated", "text"]
+
+
+def error_scale_rows(rel) -> list[list]:
+    return [[e.name, " ".join(e.instruments), e.treatment, e.readings, e.dof, e.factor, e.low, e.high,
+             e.readings_factor, e.p_stated, e.p_allowed, e.allowed_test, e.ratio_to_others, e.J, e.text]
+            for e in rel.error_scales]
+
+
+def error_scale_lines(rel) -> list[str]:
+    """The error-scale table of the report: k = true σ / stated σ of each instrument or group."""
+    if not rel.error_scales:
+        return []
+    out = ["", "Error scales (k = true σ / stated σ; c = readings minus the parameters' share):", "",
+           "| group | treatment | readings | c | k | 95 % interval | p (stated σ) |", "|---|---|---|---|---|---|---|"]
+    for e in rel.error_scales:
+        k = f"{e.factor:.3g}" if e.estimated else f"1 (readings: {e.readings_factor:.3g})"
+        out.append(f"| {e.name} | {e.treatment} | {e.readings} | {e.dof:.3g} | {k} | [{e.low:.3g}, {e.high:.3g}] | "
+                   f"{e.p_stated:.2g} |")
+    out += [""] + [f"- {e.text}" for e in rel.error_scales]
+    return out
 
 
 def write_field(field, path: Path) -> None:
@@ -133,6 +182,7 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
                "whitened_residual", "leverage"],
               [[lab.instrument, lab.kind, lab.station, lab.stage or "", lab.component, lab.x, lab.y, measured[i],
                 f.x[i], residual[i], rel.whitened_residual[i], rel.leverage[i]] for i, lab in enumerate(res.data.labels)])
+    write_csv(out / "error_scales.csv", ERROR_SCALE_HEADER, error_scale_rows(rel))
     write_csv(out / "iterations.csv", ["iteration", "mu", "J"] + names + ["accepted"],
               [[h.k, h.mu, h.J] + list(h.p) + [h.accepted] for h in f.history])
     if exploration is not None and exploration.field is not None:

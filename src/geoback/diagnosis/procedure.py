@@ -11,12 +11,33 @@
 4. Refit the most promising; likelihood-ratio test dJ ~ chi^2(k), AIC, BIC; accept the best
    significant one (Bonferroni over the hypotheses refitted); look once more; stop when adequate
    or nothing more is significant.
+
+Error scales (the case's ``error_scales``, scales.py). A free scale must not explain a mismatch
+away, so:
+- scales are estimated only where the case says so; every other sigma stays as stated;
+- adequacy is three tests, all of which must pass: (a) chi^2 of the readings whose sigma is known
+  (and of the priors), on Satterthwaite's dof (skipped when every scale is estimated, said so);
+  (b) each estimated scale against what the case allows (Bonferroni over them): with a prior, the
+  prior-predictive test (do the readings ask for a larger k than the prior allows?); without one,
+  the F test of its scale against the pooled scale of every other instrument (a scale far above
+  the others' is a located mismatch: named by `locate`, "I2's errors are 3.1x what the case
+  states ... either I2 was read less accurately than stated or the model misses something that
+  shows at I2"); (c) the score tests of the hypotheses, computed with the scales held at their
+  estimates under the null (the baseline fit), so a hypothesis is scored against the noise level
+  the baseline leaves;
+- the mismatch shares of `locate` use the stated sigma's (the misfit a scale absorbed shows where
+  it is);
+- refits re-estimate the scales with the extension's parameters; likelihood ratios, AIC and BIC
+  use the support function maximised over the scales (maximum-likelihood profile, eqn 5); a
+  missing physics that explained a large scale brings it back towards 1 and the round after
+  passes (b).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import special
 
 from ..case import Parameter
 from ..estimate import Fit, Settings, fit
@@ -69,6 +90,8 @@ class Round:
     accepted: Scored | None
     adequate: bool = False  # chi^2 test passed and no hypothesis' score test is significant
     threshold: float = float("nan")  # per-hypothesis level alpha / K (Bonferroni over the library)
+    scales: list = field(default_factory=list)  # scales.ScaleEstimate of every group at this round's fit
+    scale_threshold: float = float("nan")  # per-scale level alpha / G (Bonferroni over the estimated scales)
 
 
 @dataclass
@@ -112,16 +135,25 @@ def _fit_and_assess(misfit: Misfit, settings: Settings, method: str, max_iterati
     return res, conclude(misfit, res, None, "", {}, {}).reliability
 
 
-def locate(misfit: Misfit, res: Fit, rel: Reliability) -> list[Mismatch]:
-    """Each instrument's share of J and its most significant stretch of misfit."""
+def scale_tests(rel: Reliability, alpha: float) -> tuple[list, float]:
+    """The estimated scales tested against what the case allows, and the per-scale level."""
+    tested = [e for e in rel.error_scales if e.estimated and e.allowed_test]
+    return tested, alpha / max(len(tested), 1)
+
+
+def locate(misfit: Misfit, res: Fit, rel: Reliability, alpha: float = 0.05) -> list[Mismatch]:
+    """Each instrument's share of J (stated sigma's) and its most significant stretch of misfit;
+    an estimated error scale larger than the case allows is a mismatch too."""
     out = []
     data = misfit.data
     r = data.measured - res.x
-    J = rel.chi2  # data and priors
+    scaled = rel.scales_estimated
+    J = rel.chi2 if not scaled else rel.stated_J  # data and priors
+    residual = rel.whitened_residual if not scaled else rel.stated_residual
     offset = 0
     for block in data.blocks:
         m = len(block.labels)
-        rw = rel.whitened_residual[offset:offset + m]
+        rw = residual[offset:offset + m]
         ri = r[offset:offset + m]
         meas = data.measured[offset:offset + m]
         share = float(rw @ rw) / J if J > 0 else 0.0
@@ -156,7 +188,15 @@ def locate(misfit: Misfit, res: Fit, rel: Reliability) -> list[Mismatch]:
                 f"{100 * share:.0f} % of J")
         out.append(Mismatch(f"prior:{params.names[i]}", "prior", share, "", float(res.p[i] - params.prior_mean[i]),
                             float(abs(z)), text))
-    return sorted(out, key=lambda mm: -mm.share)
+    tested, level = scale_tests(rel, alpha)
+    for e in tested:
+        if e.p_allowed < level:
+            share = e.J / J if J > 0 else 0.0
+            out.append(Mismatch(e.name, "error-scale", share, "all its readings", float(e.factor),
+                                float(special.ndtri(1 - e.p_allowed / 2)) if e.p_allowed > 0 else float("inf"),
+                                e.text + f"; {100 * share:.0f} % of J at the stated σ's"))
+    # an instrument whose error scale is out of range is named as such before its stretches (same share)
+    return sorted(out, key=lambda mm: (-round(mm.share, 9), mm.kind != "error-scale"))
 
 
 def _strongest_run(z: np.ndarray) -> tuple[int, int, float]:
@@ -190,11 +230,13 @@ def score_hypotheses(misfit: Misfit, p_hat: np.ndarray, hypotheses: list[Hypothe
     sensitivity the baseline cannot mimic; it does not depend on how parameters are scaled."""
     n = misfit.n
     out = []
+    held = misfit.scales_at(p_hat)  # estimated error scales held at their null estimates (None: none)
     for h in hypotheses:
         ext = misfit.extended(h.parameters, h.extra_values, start=p_hat)
         p0 = np.concatenate([p_hat, [q.initial for q in h.parameters]])
-        ev = ext.evaluate(p0, jacobian=True)
+        ev = ext.with_fixed_scales(held).evaluate(p0, jacobian=True)
         r, B = ev.r, ev.B
+        J0 = float(r @ r) if held is None else ext.evaluate(p0).support
         B1, B2 = B[:, :n], B[:, n:]
         Q1, _ = np.linalg.qr(B1)
         M2 = B2 - Q1 @ (Q1.T @ B2)
@@ -203,12 +245,20 @@ def score_hypotheses(misfit: Misfit, p_hat: np.ndarray, hypotheses: list[Hypothe
         if np.all(rel_norm < COLLINEAR):
             coef = np.linalg.lstsq(B1, B2[:, 0], rcond=None)[0]
             combo = ", ".join(nm for nm, c in zip(misfit.parameters.names, coef) if abs(c) > 1e-3 * np.abs(coef).max())
-            out.append(Scored(h, 0.0, k, 1.0, collinear_with=combo, J0=float(r @ r), misfit=ext))
+            out.append(Scored(h, 0.0, k, 1.0, collinear_with=combo, J0=J0, misfit=ext))
             continue
         coef = np.linalg.lstsq(M2, r, rcond=None)[0]
         S = float(np.sum((M2 @ coef) ** 2))
-        out.append(Scored(h, S, k, chi2_sf(S, k), J0=float(r @ r), misfit=ext))
+        out.append(Scored(h, S, k, chi2_sf(S, k), J0=J0, misfit=ext))
     return out
+
+
+def _lr_objective(misfit: Misfit, f: Fit) -> float:
+    """What a likelihood ratio compares: J, or with estimated scales the support function maximised
+    over them (maximum-likelihood profile; restricted likelihoods of different models don't compare)."""
+    if not misfit.free:
+        return f.J
+    return misfit.evaluate(f.p).support
 
 
 def _best_of_groups(scored: list[Scored]) -> list[Scored]:
@@ -253,7 +303,7 @@ def _compare(s: Scored, J0: float, searched: int) -> None:
     extra quantities chosen by search rather than by the fit (a boundary's depth)."""
     extra = len(s.hypothesis.parameters) + searched
     s.J0 = J0
-    s.dJ = J0 - s.refit.J
+    s.dJ = J0 - _lr_objective(s.misfit, s.refit)
     s.p_lr = chi2_sf(max(s.dJ, 0.0), extra)
     m = len(s.reliability.whitened_residual)
     s.aic = s.reliability.aic + 2 * searched
@@ -310,7 +360,7 @@ def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], se
                          [Parameter(name=f"E[{layer}_below]", initial=E0)], {key: z}, group=h.group)
         t = Scored(hyp, template.score, template.dof, template.p_score, misfit=misfit)
         t.refit, t.reliability = _fit_and_assess(misfit, settings, method, REFIT_ITERATIONS)
-        _compare(t, cur_fit.J, 1)
+        _compare(t, _lr_objective(current, cur_fit), 1)
         tried[z] = t
 
     # the score is a linear approximation that can overrate deep boundaries: besides the three
@@ -352,18 +402,24 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     rounds: list[Round] = []
     accepted: list[Scored] = []
     for k in range(max_rounds + 1):
-        mismatches = locate(current, cur_fit, cur_rel)
-        if cur_rel.dof <= 0:
-            rounds.append(Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, [], None, True))
+        mismatches = locate(current, cur_fit, cur_rel, alpha)
+        tested, scale_level = scale_tests(cur_rel, alpha)
+        if cur_rel.total_dof <= 0:
+            rounds.append(Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, [], None, True,
+                                scales=cur_rel.error_scales, scale_threshold=scale_level))
             break
         hyps = candidate_hypotheses(current, cur_fit.p)
         say(f"scoring {len(hyps)} hypotheses")
         ranking = _best_of_groups(scored := score_hypotheses(current, cur_fit.p, hyps))
         testable = [s for s in ranking if s.collinear_with is None]
         threshold = alpha / max(len(testable), 1)
-        # adequate: the omnibus chi^2 test passes and no targeted alternative is significant
-        adequate = cur_rel.p_value >= alpha and all(s.p_score >= threshold for s in testable)
-        rnd = Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, ranking, None, adequate, threshold)
+        # adequate: the omnibus chi^2 test passes (readings of known sigma), every estimated error
+        # scale is within what the case allows, and no targeted alternative is significant
+        chi2_ok = cur_rel.p_value >= alpha if cur_rel.dof > 0 else True
+        scales_ok = all(e.p_allowed >= scale_level for e in tested)
+        adequate = chi2_ok and scales_ok and all(s.p_score >= threshold for s in testable)
+        rnd = Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, ranking, None, adequate, threshold,
+                    cur_rel.error_scales, scale_level)
         rounds.append(rnd)
         if adequate or k == max_rounds:
             break
@@ -380,7 +436,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         significant = [s for s in ranking if s.refit is not None and s.p_lr < threshold and _settled(s.refit)]
         rnd.accepted = _choose(significant)
         if rnd.accepted is None:
-            rnd.adequate = cur_rel.p_value >= alpha  # nothing in the library does better
+            rnd.adequate = chi2_ok and scales_ok  # nothing in the library does better
             break
         accepted.append(rnd.accepted)
         current, cur_fit, cur_rel = rnd.accepted.misfit, rnd.accepted.refit, rnd.accepted.reliability

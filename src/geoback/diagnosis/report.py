@@ -8,8 +8,27 @@ import numpy as np
 from ..outputs import result_set, write_atomic, write_json
 
 
-def _fit_line(chi2: float, dof: int, p: float) -> str:
-    return f"χ² = {chi2:.4g} on {dof} dof (χ²/dof = {chi2 / dof if dof else float('nan'):.3g}, p = {p:.3g})"
+def _fit_line(chi2: float, dof: float, p: float) -> str:
+    if not dof > 0:
+        return "no χ² test of stated σ's: every reading's error scale is estimated"
+    shown = dof if isinstance(dof, (int, np.integer)) else f"{dof:.4g}"
+    return f"χ² = {chi2:.4g} on {shown} dof (χ²/dof = {chi2 / dof if dof else float('nan'):.3g}, p = {p:.3g})"
+
+
+def _scale_failures(rnd) -> list:
+    return [e for e in rnd.scales if e.estimated and e.allowed_test and e.p_allowed < rnd.scale_threshold]
+
+
+def _scale_lines(rnd) -> list[str]:
+    """The estimated error scales of a round and whether each is within what the case allows."""
+    est = [e for e in rnd.scales if e.estimated]
+    if not est:
+        return []
+    out = [f"- error scales estimated (tested at {rnd.scale_threshold:.2g} each, Bonferroni):"]
+    for e in est:
+        flag = " **beyond what the case allows**" if e in _scale_failures(rnd) else ""
+        out.append(f"  - {e.text}{flag}")
+    return out
 
 
 def _estimates(s) -> list[tuple[str, float, float, float, float]]:
@@ -25,12 +44,20 @@ def _estimates(s) -> list[tuple[str, float, float, float, float]]:
 def verdict(d) -> str:
     """The plain-words answer."""
     b = d.baseline_reliability
+    failing = _scale_failures(d.rounds[0])
+    if failing and not d.accepted:
+        return ("The model does not explain the readings within the errors the case allows: "
+                + "; ".join(e.text for e in failing)
+                + f". None of the hypotheses in the library improves the fit significantly "
+                  f"({_fit_line(b.chi2, b.dof, b.p_value)}). Check those readings and their stated errors.")
     if d.adequate_before:
+        scaled = (" (with the error scales the case lets geoback estimate, each within what the case allows)"
+                  if any(e.estimated for e in d.rounds[0].scales) else "")
         best = next((s for s in d.rounds[0].ranking if s.collinear_with is None), None)
         extra = (f", and no hypothesis of the library improves it significantly (best: {best.hypothesis.title}, "
                  f"score-test p = {best.p_score:.2g} against the level {d.rounds[0].threshold:.2g})") if best else ""
         return (f"The model is adequate: {_fit_line(b.chi2, b.dof, b.p_value)}{extra} - the readings are explained "
-                f"within their stated errors. Nothing is missing.")
+                f"within their stated errors{scaled}. Nothing is missing.")
     if not d.accepted:
         return (f"The model does not explain the readings ({_fit_line(b.chi2, b.dof, b.p_value)}), but none of the "
                 f"hypotheses in the library improves the fit significantly. Check the readings and their stated "
@@ -51,10 +78,12 @@ def verdict(d) -> str:
 def diagnosis_text(d) -> str:
     lines = [f"# geoback diagnosis: {d.case}", "", verdict(d), ""]
     for k, rnd in enumerate(d.rounds, 1):
-        lines += [f"## Round {k}", "", f"- fit: {_fit_line(rnd.chi2, rnd.dof, rnd.p_value)}"]
+        lines += [f"## Round {k}", "", f"- fit: {_fit_line(rnd.chi2, rnd.dof, rnd.p_value)}"] + _scale_lines(rnd)
         if rnd.adequate and rnd.accepted is None:
-            lines += [f"- adequate: the χ² test passes at the {100 * d.alpha:g} % level and no hypothesis' score test "
-                      f"is significant at {rnd.threshold:.2g} (= {d.alpha:g} / number of hypotheses); stop"]
+            scales = (", every estimated error scale is within what the case allows"
+                      if any(e.estimated for e in rnd.scales) else "")
+            lines += [f"- adequate: the χ² test passes at the {100 * d.alpha:g} % level{scales} and no hypothesis' "
+                      f"score test is significant at {rnd.threshold:.2g} (= {d.alpha:g} / number of hypotheses); stop"]
         else:
             lines += ["- where the model and the readings differ:"] + [f"  - {m.text}" for m in rnd.mismatches[:4]]
         if rnd.ranking:
@@ -102,6 +131,8 @@ def diagnosis_json(d) -> dict:
                   "parameters": dict(zip(f.names, d.final_fit.p)), "std": dict(zip(f.names, f.std))},
         "missing": [scored(s) for s in d.accepted],
         "rounds": [{"chi2": r.chi2, "dof": r.dof, "p_value": r.p_value,
+                    "error_scales": [e.as_dict() for e in r.scales if e.estimated],
+                    "scale_threshold": r.scale_threshold,
                     "mismatches": [m.__dict__ for m in r.mismatches],
                     "ranking": [scored(s) for s in r.ranking],
                     "accepted": r.accepted.hypothesis.key if r.accepted else None} for r in d.rounds],
