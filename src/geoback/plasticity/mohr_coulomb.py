@@ -142,12 +142,16 @@ def elastic_matrix(mat: Material) -> np.ndarray:
     return D
 
 
-def trial_stress(sigma_n: np.ndarray, deps: np.ndarray, mat: Material) -> np.ndarray:
-    """sigma_trial = sigma_n + D deps (n, 4)."""
-    lam, G = lame(mat.E, mat.nu)
+def _elastic_increment(lam, G, deps: np.ndarray) -> np.ndarray:
+    """D deps (n, 4) for Lame constants lam, G."""
     exx, eyy, gxy = deps[:, 0], deps[:, 1], deps[:, 2]
     vol = lam * (exx + eyy)
-    return sigma_n + np.stack([vol + 2 * G * exx, vol + 2 * G * eyy, vol, G * gxy], axis=1)
+    return np.stack([vol + 2 * G * exx, vol + 2 * G * eyy, vol, G * gxy], axis=1)
+
+
+def trial_stress(sigma_n: np.ndarray, deps: np.ndarray, mat: Material) -> np.ndarray:
+    """sigma_trial = sigma_n + D deps (n, 4)."""
+    return sigma_n + _elastic_increment(*lame(mat.E, mat.nu), deps)
 
 
 def principal(sigma: np.ndarray):
@@ -211,14 +215,31 @@ def _return_to(s: np.ndarray, mat: Material, sel: tuple[int, ...]):
     DN = lam[:, None, None] * N.sum(axis=1, keepdims=True) + 2 * G[:, None, None] * N  # De n_j
     M = A @ DN
     rhs = np.einsum("nkx,nx->nk", A, s) - b
-    det = np.linalg.det(M.real) if np.iscomplexobj(M) else np.linalg.det(M)
-    size = np.abs(M.real).max(axis=(1, 2)) ** len(sel)
-    ok = np.abs(det) > 1e-12 * size
-    if not ok.all():
-        M = np.where(ok[:, None, None], M, np.eye(len(sel)))
-        rhs = np.where(ok[:, None], rhs, 0.0)
-    dgamma = np.linalg.solve(M, rhs[..., None])[..., 0]
+    dgamma, ok = _small_solve(M, rhs)
     return s - np.einsum("nxj,nj->nx", DN, dgamma), dgamma, ok, G
+
+
+def _small_solve(M, rhs):
+    """Batched solve of m x m systems (m <= 3; explicit for m <= 2), and a flag of the
+    non-singular ones (the others get zero)."""
+    m = M.shape[-1]
+    if m == 1:
+        det = M[:, 0, 0]
+    elif m == 2:
+        det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
+    else:
+        det = np.linalg.det(M.real) if np.iscomplexobj(M) else np.linalg.det(M)
+    ok = np.abs(det.real) > 1e-12 * np.abs(M.real).max(axis=(1, 2)) ** m
+    det = np.where(ok, det, 1.0)
+    rhs = np.where(ok[:, None], rhs, 0.0)
+    if m == 1:
+        return rhs / det[:, None], ok
+    if m == 2:
+        x0 = (M[:, 1, 1] * rhs[:, 0] - M[:, 0, 1] * rhs[:, 1]) / det
+        x1 = (M[:, 0, 0] * rhs[:, 1] - M[:, 1, 0] * rhs[:, 0]) / det
+        return np.stack([x0, x1], axis=1), ok
+    M = np.where(ok[:, None, None], M, np.eye(m))
+    return np.linalg.solve(M, rhs[..., None])[..., 0], ok
 
 
 def _admissible(ret, s_trial, mat, sel):
@@ -350,12 +371,28 @@ def consistent_tangent(sigma_n: np.ndarray, deps: np.ndarray, mat: Material,
 def directional_derivative(sigma_n: np.ndarray, deps: np.ndarray, mat: Material,
                            d_sigma_n: np.ndarray | None = None, d_deps: np.ndarray | None = None,
                            d_mat: Material | None = None, mode: np.ndarray | None = None) -> np.ndarray:
-    """Derivative (n, 4) of update(sigma_n, deps, mat) along (d_sigma_n, d_deps, d_mat),
-    by complex step (exact to rounding); the active sets are those of the unperturbed update."""
+    """Derivative (n, 4) of update(sigma_n, deps, mat) along (d_sigma_n, d_deps, d_mat), exact to
+    rounding; the active sets are those of the unperturbed update. Elastic points: the linear
+    update differentiated directly, d sigma_n + D d_deps + dD deps (dD by complex step of the Lame
+    constants); plastic points: complex step of the whole update."""
     n = len(sigma_n)
     mat = mat.at(n)
     if d_mat is not None:
         d_mat = d_mat.at(n)
     if mode is None:
         mode = select(trial_stress(sigma_n, deps, mat), mat)
-    return _complex_step(sigma_n, deps, mat, mode, d_sigma_n, d_deps, d_mat)
+    out = np.zeros((n, 4)) if d_sigma_n is None else np.array(d_sigma_n, float)
+    lam, G = lame(mat.E, mat.nu)
+    if d_deps is not None:
+        out += _elastic_increment(lam, G, d_deps)
+    if d_mat is not None and (np.any(d_mat.E) or np.any(d_mat.nu)):
+        size = max(np.abs(d_mat.E).max(), np.abs(d_mat.nu).max())
+        h = 1e-30 / size
+        lam_c, G_c = lame(mat.E + 1j * h * d_mat.E, mat.nu + 1j * h * d_mat.nu)
+        out += _elastic_increment(lam_c.imag / h, G_c.imag / h, deps)
+    plastic = np.flatnonzero(mode != ELASTIC)
+    if len(plastic):
+        pick = (lambda a: None if a is None else a[plastic])
+        out[plastic] = _complex_step(sigma_n[plastic], deps[plastic], mat.take(plastic), mode[plastic],
+                                     pick(d_sigma_n), pick(d_deps), None if d_mat is None else d_mat.take(plastic))
+    return out
