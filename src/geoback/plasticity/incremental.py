@@ -64,7 +64,20 @@ API
 Returns :class:`Result`: ``u`` (n_stages, nfree), ``du_dp`` (n_stages, nfree, n_params) or
 None, ``sigma`` (n_stages, ne, nq, 4), ``plastic`` / ``yielded`` (n_stages, ne, nq) booleans
 (yielding in the stage's last increment / at any increment so far), ``increments`` (log of
-every Newton attempt with its residual history), ``schedule`` (to replay), ``counters``.
+every Newton attempt with its residual history), ``schedule`` (to replay), ``counters``
+(factorisations, back-substitutions, Newton iterations, increments, cutbacks, apex points,
+seconds by part). Raises :class:`NonConvergence` (a ``GeobackError``) or ``ValueError`` for
+inputs of the wrong shape, non-increasing stages or an initial stress outside the yield surface.
+
+Limits
+------
+Perfect plasticity with non-associated flow (psi < phi) can lose uniqueness of the incremental
+problem (Hill 1958; Rudnicki & Rice 1975: shear bands). On fine meshes with little dilation the
+tangent's eigenvalues of least real part approach zero and Newton cycles between patterns of
+loading and unloading points (spiral bands around a tunnel): measured on the deep tunnel with
+psi = 0 from about 10 k DOFs (wall elements R/14 or finer), at lambda = 0.8-0.93. The run then
+stops with NonConvergence; coarser meshes, or more dilation, converge (see
+studies/plastic_convergence.py).
 """
 from __future__ import annotations
 
@@ -264,16 +277,14 @@ class _Problem:
         for it in range(1, opts.max_iterations + 1):
             u += lu.solve(-r)
             self.counters.newton_iterations += 1
-            with self.counters.timed("return mapping"):
+            with self.counters.timed("return mapping and tangent"):
                 deps = ops.strain(u - state.u)
-                sigma, mode = mc.update(state.sigma, deps, self.mat)
+                sigma, C, mode = mc.update_with_tangent(state.sigma, deps, self.mat)
             r = self.residual(sigma, lam)
             rel = float(np.linalg.norm(r) / ref)
             residuals.append(rel)
             if not np.isfinite(rel):
                 raise _Failed(residuals, "residual not finite")
-            with self.counters.timed("tangent (complex step)"):
-                C = mc.consistent_tangent(state.sigma, deps, self.mat, mode)
             if rel <= opts.tol:
                 return _Converged(u, sigma, deps, mode, C, residuals)
             if rel > 1e6 * residuals[0] and it > 1:
@@ -436,13 +447,16 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
 def _sensitivities(problem: _Problem, der: _Derivatives, old: _State, new: _State, res: _Converged, lu: LU):
     """Eqns (3)-(4): du/dp and d sigma/dp at the converged increment old -> new, in place on new."""
     ops = problem.ops
-    with problem.counters.timed("sensitivities"):
-        P = len(der.names)
-        e = np.empty((ops.npts, 4, P))
-        d_deps = -ops.strain(old.du)  # (npts, 3, P)
-        for j in range(P):
-            e[:, :, j] = mc.directional_derivative(old.sigma, res.deps, problem.mat, old.dsigma[:, :, j],
-                                                   d_deps[:, :, j], der.material[j], res.mode)
-        rhs = problem.f[:, None] * new.dlam[None, :] + new.lam * der.f - ops.internal_force(e - der.sigma0)
+    timed = problem.counters.timed
+    with timed("sensitivities"):
+        with timed("sensitivities: local derivatives and right-hand sides"):
+            P = len(der.names)
+            e = np.empty((ops.npts, 4, P))
+            d_deps = -ops.strain(old.du)  # (npts, 3, P)
+            for j in range(P):
+                e[:, :, j] = mc.directional_derivative(old.sigma, res.deps, problem.mat, old.dsigma[:, :, j],
+                                                       d_deps[:, :, j], der.material[j], res.mode)
+            rhs = problem.f[:, None] * new.dlam[None, :] + new.lam * der.f - ops.internal_force(e - der.sigma0)
         new.du = lu.solve(rhs)
-        new.dsigma = e + np.einsum("nij,njp->nip", res.C, ops.strain(new.du))
+        with timed("sensitivities: stress history"):
+            new.dsigma = e + np.einsum("nij,njp->nip", res.C, ops.strain(new.du))

@@ -329,6 +329,14 @@ def update(sigma_n: np.ndarray, deps: np.ndarray, mat: Material, mode: np.ndarra
     return return_map(trial_stress(sigma_n, deps, mat), mat, mode)
 
 
+def update_with_tangent(sigma_n: np.ndarray, deps: np.ndarray, mat: Material):
+    """Stress after the increment (n, 4), its consistent tangent d sigma / d deps (n, 4, 3) and the
+    mode of every point (ELASTIC, active set k >= 1, APEX)."""
+    mat = mat.at(len(sigma_n))
+    sigma, mode = update(sigma_n, deps, mat)
+    return sigma, consistent_tangent(sigma_n, deps, mat, mode), mode
+
+
 def _complex_step(sigma_n, deps, mat, mode, d_sigma_n=None, d_deps=None, d_mat=None):
     """Im update(x + i h dx) / h for one direction dx (any part may be None = zero)."""
     size = max([np.abs(np.asarray(d)).max(initial=0.0) for d in (d_sigma_n, d_deps) if d is not None]
