@@ -67,7 +67,8 @@ def main(argv=None):
     from geoback.plasticity.linear import default_backend
 
     print(f"DOFs {fe.nfree}   quadrature points {ops.npts}   psi {args.psi:g} deg   "
-          f"backend {opts.backend or default_backend(fe.nfree)}   MKL threads {os.environ.get('MKL_NUM_THREADS', 'default')}")
+          f"backend {opts.backend or default_backend(fe.nfree)}   "
+          f"MKL threads {os.environ.get('MKL_NUM_THREADS', 'default')}")
     print(f"set-up: mesh + FEModel {t_model:.2f} s, point operators {t_ops:.2f} s")
     print(f"forward: {t_fwd:.2f} s wall   increments {c.increments}   Newton iterations {c.newton_iterations}   "
           f"factorisations {c.factorisations}   back-substitutions {c.backsubstitutions}   cutbacks {c.cutbacks}")

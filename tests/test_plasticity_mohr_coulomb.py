@@ -3,7 +3,7 @@
 * elastic states are left alone, with the elastic tangent;
 * after a return the stress satisfies the yield conditions, and the plastic strain is a
   non-negative combination of the active flow directions (Kuhn-Tucker), associated or not;
-* the main-plane return equals the closed form of de Souza Neto et al. (2008), Box 8.4;
+* the main-plane return equals the closed form of de Souza Neto et al. (2008, ch. 8);
 * associated flow: the return is the closest point in the energy norm (checked against a
   general-purpose constrained minimiser), tension cut-off included;
 * the apex: hydrostatic tension beyond c cot(phi) returns to it;
@@ -96,7 +96,7 @@ def test_returned_stresses_satisfy_the_yield_conditions_and_kuhn_tucker(psi_deg,
     assert checked > 100
 
 
-def test_main_plane_return_is_the_closed_form_of_box_8_4():
+def test_main_plane_return_is_the_closed_form():
     psi = np.radians(10.0)
     mat = Material(E, NU, C, PHI, psi)
     # principal trial stresses well apart, moderately outside: returns to the face F1

@@ -25,8 +25,9 @@ strains follow the flow rule eps_r^p + K_psi eps_t^p = 0. Compatibility gives
 dU/dr + K_psi U / r = h(r) with h = (1+nu)/E [(1 - nu - nu K_psi) ds_r + (K_psi (1 - nu) - nu) ds_t],
 ds = s - p0, integrated from U(R_p):
 
-    U(r) = U(R_p) (R_p/r)^K_psi + (1+nu)/E { alpha (p_i + A) R^(1-K_p) [r^K_p - R_p^(K_p+K_psi) r^-K_psi] / (K_p + K_psi)
-                                             - (1 - 2 nu)(p0 + A) [r - R_p^(K_psi+1) r^-K_psi] },
+    U(r) = U(R_p) (R_p/r)^K_psi
+           + (1+nu)/E { alpha (p_i + A) R^(1-K_p) [r^K_p - R_p^(K_p+K_psi) r^-K_psi] / (K_p + K_psi)
+                        - (1 - 2 nu)(p0 + A) [r - R_p^(K_psi+1) r^-K_psi] },
     alpha = (1 - nu - nu K_psi) + K_p (K_psi (1 - nu) - nu)
 
 (the small-strain solution of Carranza-Torres & Fairhurst 2000 for Mohr-Coulomb; with psi = phi

@@ -9,9 +9,9 @@ Young's modulus E [kPa], Poisson's ratio nu, cohesion c [kPa], friction angle ph
 angle psi (psi != phi: non-associated flow) and an optional tension cut-off ``tension`` [kPa]
 (the largest admissible principal stress; ``inf`` = none).
 
-Model (de Souza Neto, Peric & Owen 2008, *Computational Methods for Plasticity*, sec. 6.4.4,
-8.2.4 and Boxes 8.4-8.5). With the principal stresses sorted s1 >= s2 >= s3 (tension positive
-algebraic order) the admissible set is
+Model (de Souza Neto, Peric & Owen 2008, *Computational Methods for Plasticity*, ch. 8, the
+Mohr-Coulomb return mapping of Boxes 8.4-8.5, here perfectly plastic). With the principal
+stresses sorted s1 >= s2 >= s3 (tension positive algebraic order) the admissible set is
 
     F1(s) = (s1 - s3) + (s1 + s3) sin(phi) - 2 c cos(phi) <= 0          (Mohr-Coulomb)
     T1(s) = s1 - tension <= 0                                           (tension cut-off)
@@ -33,13 +33,15 @@ active together with F1 on the edges). Backward-Euler return with an active set 
 De = lam 1 1^t + 2 G I (principal elasticity). The yield planes are linear and the material
 perfectly plastic, so every return is one small linear solve (no local Newton). The active set
 is the first of the candidates below whose solution satisfies the Kuhn-Tucker conditions
-(dgamma >= 0, F1 <= 0, T1 <= 0, order s1 >= s2 >= s3 kept): face F1 (Box 8.4 "main plane"),
-the edges F1+F2 and F1+F3 (Box 8.5 "right/left edge", selected here by the Kuhn-Tucker test
-rather than by the book's geometric criterion, which is equivalent), the tension face, the
-MC/tension edge and corners and the tension apex. If none qualifies (only possible beyond the
-Mohr-Coulomb apex: with psi = 0 the flow has no volumetric part and no return exists there) the
-stress goes to the apex ``min(c cot phi, tension) (1, 1, 1)`` as in Box 8.5; such points are
-flagged with mode ``APEX``.
+(dgamma >= 0, F1 <= 0, T1 <= 0, order s1 >= s2 >= s3 kept): face F1 (the book's "main plane"),
+the edges F1+F2 and F1+F3 (its "right/left corner" returns; the book picks the edge from the
+sign of (1 - sin psi) s1 - 2 s2 + (1 + sin psi) s3, here the Kuhn-Tucker test decides, which
+also covers the cut-off), the tension face, the MC/tension edge and corners, the tension apex.
+For associated flow the result is the closest admissible point in the energy norm (tested). If
+no candidate qualifies (only beyond the Mohr-Coulomb apex: with psi = 0 the flow has no
+volumetric part and no return exists there) the stress goes to the apex
+``min(c cot phi, tension) (1, 1, 1)``, as the book's apex return does for perfect plasticity;
+such points have mode ``APEX`` and are counted by the incremental solver.
 
 Principal directions: the in-plane pair comes from the 2x2 block, eigenvalues m +- r with
 m = (sxx+syy)/2, r = sqrt(((sxx-syy)/2)^2 + sxy^2); szz is the third principal stress. The
@@ -171,13 +173,16 @@ def _sorted_principal(sigma: np.ndarray):
     return np.take_along_axis(p, order, axis=1), order, p, r
 
 
+def _mohr_coulomb(s: np.ndarray, c, phi):
+    """F1 of sorted principal stresses s (n, 3)."""
+    return (s[:, 0] - s[:, 2]) + (s[:, 0] + s[:, 2]) * np.sin(phi) - 2 * c * np.cos(phi)
+
+
 def yield_functions(sigma: np.ndarray, mat: Material):
     """Mohr-Coulomb F1 and tension T1 (n,) at stresses sigma (n, 4); <= 0 is admissible."""
     s = _sorted_principal(sigma)[0]
     mat = mat.at(len(sigma))
-    sphi = np.sin(mat.phi)
-    f = (s[:, 0] - s[:, 2]) + (s[:, 0] + s[:, 2]) * sphi - 2 * mat.c * np.cos(mat.phi)
-    return f, s[:, 0] - mat.tension
+    return _mohr_coulomb(s, mat.c, mat.phi), s[:, 0] - mat.tension
 
 
 def _scale(s, mat):
@@ -242,15 +247,12 @@ def _small_solve(M, rhs):
     return np.linalg.solve(M, rhs[..., None])[..., 0], ok
 
 
-def _admissible(ret, s_trial, mat, sel):
-    """Kuhn-Tucker test of a candidate return (real parts)."""
-    s, dgamma, ok, G = (x.real if np.iscomplexobj(x) else x for x in ret)
-    scale = _scale(s_trial, mat)
-    tol = KKT_TOL * scale
-    sphi = np.sin(mat.phi.real)
-    f = (s[:, 0] - s[:, 2]) + (s[:, 0] + s[:, 2]) * sphi - 2 * mat.c.real * np.cos(mat.phi.real)
+def _admissible(ret, s_trial, mat):
+    """Kuhn-Tucker test of a candidate return (real material, real trial)."""
+    s, dgamma, ok, G = ret
+    tol = KKT_TOL * _scale(s_trial, mat)
     good = ok & np.all(2 * G[:, None] * dgamma >= -tol[:, None], axis=1)
-    good &= (s[:, 0] - s[:, 1] >= -tol) & (s[:, 1] - s[:, 2] >= -tol) & (f <= tol)
+    good &= (s[:, 0] - s[:, 1] >= -tol) & (s[:, 1] - s[:, 2] >= -tol) & (_mohr_coulomb(s, mat.c, mat.phi) <= tol)
     t = mat.tension.real
     good &= ~np.isfinite(t) | (s[:, 0] - np.where(np.isfinite(t), t, 0.0) <= tol)
     return good
@@ -274,7 +276,7 @@ def select(sigma_trial: np.ndarray, mat: Material) -> np.ndarray:
             if not len(idx):
                 continue
             m_idx = mat.take(idx)
-            good = _admissible(_return_to(s[idx], m_idx, sel), s[idx], m_idx, sel)
+            good = _admissible(_return_to(s[idx], m_idx, sel), s[idx], m_idx)
             mode[idx[good]] = k
             todo = np.setdiff1d(todo, idx[good], assume_unique=True)
     mode[todo] = APEX
@@ -305,7 +307,8 @@ def return_map(sigma_trial: np.ndarray, mat: Material, mode: np.ndarray | None =
     i = np.flatnonzero(mp == APEX)
     if len(i):
         m_a = m_p.take(i)
-        apex = m_a.c / np.tan(m_a.phi)
+        with np.errstate(divide="ignore"):  # phi = 0 has no apex (and never lands here)
+            apex = m_a.c / np.tan(m_a.phi)
         apex = np.where(np.isfinite(m_a.tension.real) & (m_a.tension.real < apex.real), m_a.tension, apex)
         ret[i] = apex[:, None]
     out = np.empty_like(ret)
