@@ -121,3 +121,18 @@ def test_bad_inputs_are_refused(small):
         solve(fe, mat, sigma0, f[:-1], [1.0], operators=ops)
     with pytest.raises(ValueError, match="per element"):
         solve(fe, Material.from_degrees(np.ones(3), NU, C, PHI, 0.0), sigma0, f, [1.0], operators=ops)
+
+
+def test_per_element_and_per_point_inputs(small):
+    """Material per element or per quadrature point, and sigma0 per point, give the scalar run."""
+    fe, ops = small
+    sigma0, f = hydrostatic_load(fe, P0)
+    mat = Material.from_degrees(E, NU, C, PHI, 10.0)
+    opts = Options(schedule=((0.5, 0.8, 1.0),))
+    ref = solve(fe, mat, sigma0, f, [1.0], options=opts, operators=ops)
+    per_elem = Material(*(np.full(fe.ne, v) for v in mat.values()))
+    per_point = Material(*(np.full((fe.ne, ops.nq), v) for v in mat.values()))
+    for m, s0 in ((per_elem, sigma0), (per_point, np.tile(sigma0, (fe.ne, ops.nq, 1)))):
+        res = solve(fe, m, s0, f, [1.0], options=opts, operators=ops)
+        assert np.array_equal(res.u, ref.u) and np.array_equal(res.plastic, ref.plastic)
+    assert ref.plastic.any()

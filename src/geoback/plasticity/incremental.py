@@ -116,7 +116,7 @@ class Options:
     fast: int = 4  # converged in at most this many iterations: the next increment grows
     max_increments: int = 400  # Newton attempts (converged or not) in the whole run
     schedule: tuple | None = None  # fixed: per stage, increasing fractions s in (0, 1], ending at 1
-    backend: str | None = None  # 'pardiso' | 'scipy' | None (geoback.solver.default_backend)
+    backend: str | None = None  # 'pardiso' | 'scipy' | None (plasticity.linear.default_backend)
 
 
 @dataclass
@@ -152,15 +152,15 @@ class IncrementLog:
 
 @dataclass
 class Result:
-    stages: np.ndarray
-    u: np.ndarray
-    du_dp: np.ndarray | None
-    names: list
-    sigma: np.ndarray
-    plastic: np.ndarray
-    yielded: np.ndarray
-    increments: list
-    schedule: tuple
+    stages: np.ndarray  # lambda_i (n_stages,)
+    u: np.ndarray  # (n_stages, nfree) displacements caused by the excavation
+    du_dp: np.ndarray | None  # (n_stages, nfree, n_params), parameters in the order of `names`
+    names: list  # parameter names (ParameterDerivative.name)
+    sigma: np.ndarray  # (n_stages, ne, nq, 4) total stress (sxx, syy, szz, sxy)
+    plastic: np.ndarray  # (n_stages, ne, nq) yielding in the stage's last increment
+    yielded: np.ndarray  # (n_stages, ne, nq) yielded in some increment up to the stage
+    increments: list  # IncrementLog of every Newton attempt, converged or not
+    schedule: tuple  # per stage, the fractions s where increments ended (Options(schedule=...) replays)
     counters: Counters
     tol: float
 
@@ -249,9 +249,8 @@ class _Problem:
     def __init__(self, ops, mat, sigma0, f, opts, counters):
         self.ops, self.mat, self.sigma0, self.f, self.opts, self.counters = ops, mat, sigma0, f, opts, counters
         self.f_norm = np.linalg.norm(f)
-        self.D = mc.elastic_matrix(mat)
         with counters.timed("assemble tangent"):
-            self.Ke_elastic = ops.element_matrices(self.D)
+            self.Ke_elastic = ops.element_matrices(mc.elastic_matrix(mat))
             self.K_elastic = ops.assemble(self.Ke_elastic)
 
     def residual(self, sigma, lam):
