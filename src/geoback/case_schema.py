@@ -327,6 +327,10 @@ class FitSettings(Strict):
     objective_tol: Positive = 1e-10
     weighting: Literal["full", "diagonal", "identity"] = Field(
         "full", description="C_x used in J: the instruments' full covariance (eqn 9), its diagonal, or I (eqn 8)")
+    mesh_error: Literal["check", "include", "ignore"] = Field(
+        "check", description="discretisation error of the readings, from one run at the estimate on a mesh twice as "
+                             "fine: 'check' reports it against each reading's sigma (a warning above 0.3 sigma); "
+                             "'include' adds it to C_x and fits again; 'ignore' skips the check")
 
 
 class Output(Strict):

@@ -14,6 +14,7 @@ and a sentence that says what was found and what to check. Codes:
 | `implausible-value` | an estimate outside the usual range for ground |
 | `implausible-input` | a value of the case outside the usual range (a unit slip?) |
 | `exactly-determined` | as many readings as parameters: χ² cannot test the model |
+| `mesh-error` | the mesh's discretisation error on a reading above 0.3 of its sigma |
 | `error-scale` | an estimated error scale beyond what the case allows for it (its prior, or the other instruments) |
 """
 from __future__ import annotations

@@ -171,6 +171,8 @@ class Identification:
     profiled: dict = field(default_factory=dict)  # name -> (low, high, low open, high open): profile-
     # likelihood 95 % intervals; an open end is a limit (bound or allowed range) the readings do not move away from
     caveats: tuple = ()  # what not to trust, in words and codes (geoback.caveats)
+    mesh_error: object = None  # geoback.mesh_error.MeshError, if checked
+    mesh_error_included: bool = False  # its variance added to C_x before the final fit
 
     @property
     def status(self) -> str:
@@ -221,12 +223,15 @@ class Identification:
 
 
 def identify(case, method: str | None = None, progress=None, weighting: str | None = None,
-             p0: np.ndarray | None = None, profile: str = "auto", require_dof: bool = True) -> Identification:
+             p0: np.ndarray | None = None, profile: str = "auto", require_dof: bool = True,
+             mesh_error: str | None = "ignore") -> Identification:
     """Identify the case's parameters and assess the estimate (no files written).
 
     case: a LoadedCase (prepared here) or an Analysis (its simulation and factorisations reused);
     profile: 'auto' (profile-likelihood intervals where the linearised ones are unreliable), 'all'
-    or 'none'; require_dof: refuse a case with no more readings (and priors) than parameters."""
+    or 'none'; require_dof: refuse a case with no more readings (and priors) than parameters;
+    mesh_error: 'check' or 'include' the discretisation error of the readings (geoback.mesh_error;
+    one more forward run on a finer mesh), 'ignore' it, or None for the case's fit.mesh_error."""
     t0 = time.perf_counter()
     analysis = case if isinstance(case, Analysis) else prepare(case)
     t1 = time.perf_counter()
@@ -248,12 +253,31 @@ def identify(case, method: str | None = None, progress=None, weighting: str | No
     sim = analysis.simulation
     before = sim.counters.snapshot()
     result = fit(misfit, analysis.settings, method=method, p0=p0, progress=progress)
+    mode = analysis.case.fit.mesh_error if mesh_error is None else mesh_error
+    merr, notices = None, analysis.notices
+    if mode != "ignore" and result.moved:
+        from .caveats import Caveat
+        from .mesh_error import WARN, discretisation_error
+
+        merr = discretisation_error(analysis, misfit, result.p)
+        if mode == "include" and not merr.skipped:  # the mesh's error as an independent error of each reading
+            data = misfit.data
+            widened = Data(data.blocks, data.measured, data.covariance + np.diag(merr.difference ** 2), data.labels)
+            misfit = Misfit(misfit.simulation, widened, misfit.parameters, misfit.base_values, misfit.weighting,
+                            misfit.scales)
+            result = fit(misfit, analysis.settings, method=method, p0=result.p, progress=progress)
+        elif merr.max_sigma > WARN:
+            notices = tuple(notices) + (Caveat(
+                "mesh-error", merr.text() + f": above {WARN:g} sigma, the mesh may bias the estimate; refine the "
+                "mesh near the instruments (mesh.size_tunnel, mesh.size_instruments) or add the error to C_x "
+                "with fit: {mesh_error: include}"),)
     counts = sim.counters.since(before)
     t2 = time.perf_counter()
     out = conclude(misfit, result, analysis.case, analysis.loaded.digest(), counts,
-                   dict(sim.timings, setup=t1 - t0, fit=t2 - t1), analysis.settings, profile, analysis.notices)
+                   dict(sim.timings, setup=t1 - t0, fit=t2 - t1), analysis.settings, profile, notices)
     out.seconds["assess"] = time.perf_counter() - t2
-    return out
+    return replace(out, mesh_error=merr, mesh_error_included=mode == "include" and merr is not None
+                   and not merr.skipped)
 
 
 def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, seconds: dict,

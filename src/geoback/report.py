@@ -39,6 +39,8 @@ def summary(res, exploration=None) -> dict:
                            "at_bound": bool(f.at_bound[i])}
                        for i, n in enumerate(params.names)},
         "warnings": [c.as_dict() for c in res.caveats],
+        "mesh_error": ({**res.mesh_error.as_dict(), "included_in_C_x": res.mesh_error_included}
+                       if res.mesh_error is not None else {"checked": False, "reason": "fit.mesh_error: ignore"}),
         "J": f.J, "chi2": rel.chi2, "dof": rel.dof, "reduced_chi2": rel.reduced_chi2, "p_value": rel.p_value,
         "minus_2_log_likelihood": rel.minus2logL, "aic": rel.aic, "bic": rel.bic,
         "condition_number": rel.condition, "undetermined": rel.undetermined,
@@ -103,6 +105,9 @@ def report_text(res) -> str:
               if np.isfinite(rel.correlation[i, j]) and abs(rel.correlation[i, j]) > 0.5]
     if strong:
         lines += ["", "Correlations above 0.5: " + ", ".join(f"C({a}, {b}) = {c:+.3f}" for a, b, c in strong)]
+    if res.mesh_error is not None:
+        lines += ["", "Mesh: " + res.mesh_error.text() + (" - included in C_x for this fit"
+                                                           if res.mesh_error_included else "")]
     top = np.argsort(-rel.leverage)[:3]
     lines += ["", "Most informative readings (leverage = diag Q): " +
               ", ".join(f"{reading_label(res.data.labels[i])} ({rel.leverage[i]:.2f})" for i in top)]

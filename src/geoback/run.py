@@ -19,7 +19,7 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
     analysis = prepare(loaded)
     if prepared is not None:
         prepared(analysis)
-    res = identify(analysis, method=method, progress=progress, profile=profile)
+    res = identify(analysis, method=method, progress=progress, profile=profile, mesh_error=None)
     vtu = loaded.case.output.vtu if vtu is None else vtu
     what = ("field",) if vtu else ()
     if plots:
