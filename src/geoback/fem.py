@@ -86,13 +86,18 @@ class FEModel:
         self.edofs = edofs
         redofs = free_index[edofs]
 
-        # upper-triangle entries of the reduced global matrix contributed by each element
-        a, b = np.meshgrid(np.arange(2 * nb), np.arange(2 * nb), indexing="ij")
-        ra, rb = redofs[:, a.ravel()], redofs[:, b.ravel()]
-        keep = (ra >= 0) & (rb >= 0) & (ra <= rb)
+        # upper-triangle entries of the reduced global matrix contributed by each element: the local
+        # pairs i <= j (the component matrices are symmetric), placed at (min, max) of their global dofs
+        iu, ju = np.triu_indices(2 * nb)
+        ra, rb = redofs[:, iu], redofs[:, ju]
+        lo, hi = np.minimum(ra, rb), np.maximum(ra, rb)
+        del ra, rb
+        keep = lo >= 0  # both dofs free (hi >= lo)
         self._entry_elem = np.repeat(np.arange(self.ne, dtype=np.int32), keep.sum(axis=1))
-        keys = ra[keep] * self.nfree + rb[keep]
+        keys = lo[keep] * self.nfree + hi[keep]
+        del lo, hi
         uniq, slots = np.unique(keys, return_inverse=True)
+        del keys
         self._slots = slots.astype(np.int64)
         rows = uniq // self.nfree
         self._indices = (uniq % self.nfree).astype(np.int32)
@@ -104,10 +109,10 @@ class FEModel:
         pos = 0
         for start in range(0, self.ne, chunk):
             sl = slice(start, min(start + chunk, self.ne))
-            local = self._local_components(sl)  # (4, n, 2nb, 2nb)
+            local = self._local_components(sl)[:, :, iu, ju]  # (4, n, pairs)
             k = keep[sl]
             n_here = int(k.sum())
-            self._values[:, pos:pos + n_here] = local.reshape(4, local.shape[1], -1)[:, k]
+            self._values[:, pos:pos + n_here] = local[:, k]
             pos += n_here
 
         coords = self.nodes[self.tri]
