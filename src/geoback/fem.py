@@ -11,27 +11,24 @@ a per-element coefficient array, K for new parameters is formed without re-assem
 dK/dp = sum_e dD_e/dp K_e is exact (eqn 36). The excavation load is the release of the
 initial stress on the tunnel wall, f = -int_S N^t sigma0 n dS (eqn 33, n outward of the
 ground), linear in sigma_v and in K0*sigma_v at the wall's quadrature points (eqns 39-40).
-Shape functions and quadrature rules come from scikit-fem.
+Shape functions and quadrature rules are in ``shapes.py``.
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from skfem import ElementLineP1, ElementLineP2, ElementTriP1, ElementTriP2
-from skfem.quadrature import get_quadrature
-from skfem.refdom import RefLine, RefTri
+from .shapes import Element, line_rule, triangle_rule
 
 from .mesh import Mesh
 
 
-def _ref_basis(element, X: np.ndarray):
+def _ref_basis(element: Element, X: np.ndarray):
     """Values (nb, nq) and reference gradients (nb, 2|1, nq) of an element's shape functions."""
-    vals, grads = zip(*(element.lbasis(X, i) for i in range(element.doflocs.shape[0])))
-    return np.array(vals), np.array(grads)
+    return element.basis(X)
 
 
-def _tri_element(order: int):
-    return ElementTriP2() if order == 2 else ElementTriP1()
+def _tri_element(order: int) -> Element:
+    return Element("triangle", order)
 
 
 def _geometry(coords: np.ndarray, dN: np.ndarray):
@@ -61,7 +58,7 @@ class FEModel:
         self.centre, self.radius = np.asarray(tunnel_centre, float), radius
         self.element = _tri_element(self.order)
         nb = self.tri.shape[1]
-        self._X, self._W = get_quadrature(RefTri, 2 * self.order)
+        self._X, self._W = triangle_rule(2 * self.order)
         _, self._dN = _ref_basis(self.element, self._X)
 
         # boundary conditions: symmetry axis and far side ux = 0, bottom fixed
@@ -170,8 +167,8 @@ class FEModel:
     def _build_wall(self):
         """Quadrature on the excavated boundary: points, weights, normals, shape values."""
         edges = self.mesh.tunnel_edges
-        line = ElementLineP2() if self.order == 2 else ElementLineP1()
-        X, W = get_quadrature(RefLine, 2 * self.order + 2)
+        line = Element("line", self.order)
+        X, W = line_rule(2 * self.order + 2)
         N, dN = _ref_basis(line, X)  # (nb, nq), (nb, 1, nq)
         coords = self.nodes[edges]  # (nf, nb, 2)
         xq = np.einsum("fnx,nq->fqx", coords, N)

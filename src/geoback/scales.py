@@ -65,6 +65,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import chi2
+
 
 def _special():
     """scipy.special, loaded when first needed (it costs a fifth of a second at start-up, and a case
@@ -319,11 +321,11 @@ class ScaleEstimate:
 
 
 def chi2_cdf(x: float, dof: float) -> float:
-    return float(_special().gammainc(dof / 2, x / 2)) if dof > 0 else float("nan")
+    return chi2.cdf(x, dof)
 
 
 def chi2_ppf(q: float, dof: float) -> float:
-    return float(2 * _special().gammaincinv(dof / 2, q)) if dof > 0 else float("nan")
+    return chi2.ppf(q, dof)
 
 
 def _log_posterior_interval(g: ScaleGroup, J: float, c: float, u_hat: float, level: float) -> tuple[float, float]:
@@ -361,7 +363,7 @@ def stated_p(J: float, c: float) -> float:
     """Two-sided p of k = 1: J ~ chi2(c)."""
     if not c > MIN_DOF_REPORTED:
         return float("nan")
-    lower, upper = _special().gammainc(c / 2, J / 2), _special().gammaincc(c / 2, J / 2)
+    lower, upper = chi2.cdf(J, c), chi2.sf(J, c)
     return float(min(1.0, 2 * min(lower, upper)))
 
 
