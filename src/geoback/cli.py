@@ -40,7 +40,7 @@ def friendly(func):
             _err(str(exc))
             raise typer.Exit(2) from None
         except KeyboardInterrupt:
-            from .outputs import interrupted_note
+            from .resultsets import interrupted_note
 
             _err(f"interrupted; {interrupted_note()}")
             raise typer.Exit(130) from None
@@ -73,7 +73,7 @@ OUT_HELP = ("output folder (default results/<name>); this command's previous res
 
 def _check_out(out: Optional[str], option: str = "--out", **kwargs) -> Optional[Path]:
     """--out refused before any work when it cannot take results (a file, '', not writable, ...)."""
-    from .outputs import check_out
+    from .resultsets import check_out
 
     return check_out(out, option, **kwargs)
 
@@ -124,7 +124,7 @@ def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
     """Mesh the case with gmsh; write mesh.msh and mesh.vtu."""
     out = _check_out(out)
     from .mesh import build_mesh, write_mesh
-    from .outputs import result_set
+    from .resultsets import result_set
 
     loaded = _load(case, allow_large)
     folder = _out_dir(loaded, out)

@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .outputs import result_set, write_atomic, write_csv, write_json, write_matrix_csv
+from .outputs import write_atomic, write_csv, write_json, write_matrix_csv
+from .resultsets import result_set
 
 
 def reading_label(lab) -> str:

@@ -61,7 +61,7 @@ estimated with Satterthwaite degrees of freedom (``satterthwaite_dof``, ``ellips
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -10,7 +10,8 @@ import numpy as np
 from .case import LoadedCase
 from .errors import GeobackError
 from .identification import Analysis, prepare
-from .outputs import result_set, write_csv, write_json
+from .outputs import write_csv, write_json
+from .resultsets import result_set
 from .parameters import resolve_values
 from .readings import measured_values
 

@@ -5,7 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..outputs import result_set, write_atomic, write_json
+from ..outputs import write_atomic, write_json
+from ..resultsets import result_set
 
 
 def _fit_line(chi2: float, dof: float, p: float) -> str:
