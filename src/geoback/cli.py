@@ -127,16 +127,19 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
         except ValueError:
             raise GeobackError(f"--set expects NAME=NUMBER, found '{item}'") from None
     if readings_out is not None or noise or refine != 1.0:
-        readings = synthetic_readings(loaded, refine, values, noise_seed=seed if noise else None)
+        staged = loaded.case.construction is not None
+        readings = synthetic_readings(loaded, refine, values, noise_seed=seed if noise else None, by_stage=staged)
         target = readings_out or _out_dir(loaded, out) / "readings.csv"
         write_readings_csv(loaded, readings, target)
-        typer.echo(f"{sum(len(v) for v in readings.values())} readings (mesh x{refine:g} finer"
+        count = sum(len(v) for sets in readings.values() for v in (sets.values() if staged else [sets]))
+        typer.echo(f"{count} readings (mesh x{refine:g} finer"
                    f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
         return
     analysis = prepare(loaded, parameters=[], values=values, with_readings=False)
     folder = _out_dir(loaded, out)
     res = run_simulation(analysis, folder, vtu=vtu and loaded.case.output.vtu)
-    typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs -> {folder}/predicted.csv")
+    typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs -> {folder}/predicted.csv"
+               + (", lining.csv, lining.png" if res.get("lining") is not None else ""))
 
 
 @app.command()

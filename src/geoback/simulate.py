@@ -14,13 +14,13 @@ from .outputs import write_csv, write_json
 from .readings import measured_values
 from .simulation import is_constant
 
-READING_HEADER = ["instrument", "kind", "station", "component", "x", "y", "computed"]
+READING_HEADER = ["instrument", "kind", "station", "component", "stage", "x", "y", "computed"]
 
 
 def reading_rows(labels, computed: np.ndarray, measured: np.ndarray | None = None) -> list[list]:
     rows = []
     for i, lab in enumerate(labels):
-        row = [lab.instrument, lab.kind, lab.station, lab.component, lab.x, lab.y, computed[i]]
+        row = [lab.instrument, lab.kind, lab.station, lab.component, lab.stage, lab.x, lab.y, computed[i]]
         if measured is not None:
             row.append(measured[i])
         rows.append(row)
@@ -55,7 +55,19 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
     })
     if vtu:
         write_field(sim.field(values), out / "field.vtu")
-    return {"readings": x, "dofs": sim.dofs}
+    forces = sim.lining_forces(values)
+    if forces is not None:  # thrust and moments around the lining: CSV, VTU, figure
+        from .lining import write_lining
+        from .plots import save_figures
+        from .plots.lining import lining_figure
+
+        write_lining(forces, out, vtu=vtu)
+        fig = lining_figure(forces)
+        try:
+            save_figures({"lining": fig}, out)
+        finally:
+            fig.clear()
+    return {"readings": x, "dofs": sim.dofs, "lining": forces}
 
 
 def refined_case(case, factor: float):
@@ -72,11 +84,13 @@ def refined_case(case, factor: float):
 
 
 def synthetic_readings(loaded: LoadedCase, refine: float = 2.0, values: Mapping | None = None,
-                       noise_seed: int | None = None, noise_scale: float = 1.0) -> dict[str, np.ndarray]:
+                       noise_seed: int | None = None, noise_scale: float = 1.0, by_stage: bool = False) -> dict:
     """Readings of every instrument from a finer mesh, optionally with noise drawn from C_x.
 
     `values` overrides named quantities (e.g. {'Egrad[clay]': 500, 'B[I1]': 0.002}); noise is L z
-    with C_x = L L^t per instrument (eqn 10), seeded."""
+    with C_x = L L^t per instrument (eqn 10), seeded, independent from stage to stage. Returns
+    {instrument: readings} at the last construction stage, or with `by_stage` {instrument: {stage:
+    readings}} at every stage."""
     fine = LoadedCase(refined_case(loaded.case, refine), loaded.path, loaded.marks)
     analysis = prepare(fine, parameters=[], with_readings=False)
     sim = analysis.simulation
@@ -92,12 +106,22 @@ def synthetic_readings(loaded: LoadedCase, refine: float = 2.0, values: Mapping 
         xi = x[offset:offset + block.m].copy()
         if rng is not None:
             xi += noise_scale * (np.linalg.cholesky(block.covariance) @ rng.standard_normal(block.m))
-        out[block.name] = xi
+        out.setdefault(block.name, {})[block.stage] = xi
         offset += block.m
-    return out
+    if by_stage:
+        return out
+    last = sim.stages[-1]
+    return {name: sets[last] for name, sets in out.items()}
 
 
-def write_readings_csv(loaded, readings: dict[str, np.ndarray], path: Path) -> None:
-    """Readings in the CSV layout `readings_file` accepts (instrument, station, reading)."""
+def write_readings_csv(loaded, readings: dict, path: Path) -> None:
+    """Readings in the CSV layout `readings_file` accepts (instrument, station, reading; and stage
+    when `readings` is {instrument: {stage: values}})."""
+    staged = any(isinstance(v, dict) for v in readings.values())
+    if staged:
+        rows = [[name, stage, i + 1, v] for name, sets in readings.items() for stage, values in sets.items()
+                for i, v in enumerate(values)]
+        write_csv(Path(path), ["instrument", "stage", "station", "reading"], rows)
+        return
     rows = [[name, i + 1, v] for name, values in readings.items() for i, v in enumerate(values)]
     write_csv(Path(path), ["instrument", "station", "reading"], rows)
