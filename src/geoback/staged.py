@@ -22,6 +22,12 @@ as one factorisation) and the readings' view of it PW = P K_g^-1 U. Every lined 
 and since G and PW scale as 1/s with the ground, new E, K0, beta or lining values cost a dense
 n_w x n_w Cholesky and no sparse work at all (the loads are in the span cache).
 
+That pays only while the ground's factorisation is reused. Once the ground has had to be
+refactorised (two moduli, nu, an E gradient changing: the n_w back-substitutions would then cost
+several factorisations at every step), the lined configuration is factorised directly instead:
+the ground and lining matrices assembled on the ground's free dofs plus the lining's inner dofs,
+kept while all their coefficients scale together, with eqn 34 on that system for sensitivities.
+
 Sensitivities (eqn 34, per configuration) dw_c/dv = K_c^-1 (df/dv - dK_c/dv w_c):
 - ground values: dK_1/dv = dK_g/dv; when dK_g/dv = alpha K_g (a modulus scaling K_g, eqn 42),
   K_g^-1 dK_g/dv w_1 = alpha (w_0 - W lambda) with lambda = S z_w, W = K_g^-1 U: no back-substitution;
@@ -48,6 +54,19 @@ from .mesh import Mesh
 from .simulation import Field, Prediction, Stopwatch
 
 CHUNK = 64  # wall dofs back-substituted together when the wall flexibility is formed
+_OPENBLAS = None
+
+
+def _sequential_blas():
+    """One OpenBLAS thread for the small dense interface work (n_w ~ 100-1000): on a busy machine
+    its threads cost a hundred times the work itself (1.2 s against 120 s for a 40 x 40 objective
+    slice measured on two shared cores). MKL, which PARDISO uses, is left alone."""
+    global _OPENBLAS
+    if _OPENBLAS is None:
+        from threadpoolctl import ThreadpoolController
+
+        _OPENBLAS = ThreadpoolController().select(internal_api="openblas")
+    return _OPENBLAS.limit(limits=1)
 
 
 @dataclass
@@ -97,6 +116,7 @@ class _Solution:
     z_w: np.ndarray | None = None  # wall dofs of w_1
     ring_coeffs: np.ndarray | None = None
     w1: np.ndarray | None = None  # w_1 on the free dofs (formed on demand)
+    direct: tuple | None = None  # (factorisation, scale, w_1 on ground and inner lining dofs) when direct
 
 
 class StagedSimulation(ElasticSimulation):
@@ -119,6 +139,9 @@ class StagedSimulation(ElasticSimulation):
         index = {n: k for k, n in enumerate(self.plan.names)}
         self._row_stage = np.array([index[lab.stage] for lab in self.survey.labels], np.int64)
         self._cond: _Condensation | None = None
+        self._lfactor: tuple | None = None  # (coefficients, Factorisation) of the assembled lined matrix
+        self._ground_factors = 0  # distinct ground factorisations met (condensation pays only while 1)
+        self._last_ground = None
         self._sol: _Solution | None = None
 
     # ------------------------------------------------------------------ names
@@ -169,6 +192,58 @@ class StagedSimulation(ElasticSimulation):
         self._cond = _Condensation(fact, PW, G, L)
         return self._cond
 
+    def _augmented_index(self) -> np.ndarray:
+        """Ring free dof -> unknown of the assembled lined system (ground free dofs, then inner ring)."""
+        ring = self.ring
+        idx = np.empty(ring.fe.nfree, np.int64)
+        idx[ring.o] = ring.wall_dofs
+        idx[ring.i] = self.fe.nfree + np.arange(len(ring.i))
+        return idx
+
+    def _embed_ring(self, upper, n: int):
+        """The ring's (upper CSR, ring free dofs) matrix as an upper matrix of the lined system."""
+        import scipy.sparse as sp
+
+        c = upper.tocoo()
+        idx = self._augmented_index()
+        r, k = idx[c.row], idx[c.col]
+        lo, hi = np.minimum(r, k), np.maximum(r, k)
+        return sp.csr_matrix((c.data, (lo, hi)), shape=(n, n))
+
+    def _lined_matrix(self, ground_coeffs: np.ndarray, ring_coeffs: np.ndarray):
+        import scipy.sparse as sp
+
+        n = self.fe.nfree + len(self.ring.i)
+        Kg = self.fe.matrix(ground_coeffs).tocoo()
+        K = sp.csr_matrix((Kg.data, (Kg.row, Kg.col)), shape=(n, n)) + self._embed_ring(self.ring.fe.matrix(ring_coeffs), n)
+        K.sum_duplicates()
+        K.sort_indices()
+        return K
+
+    def _lined_factorised(self, ground_coeffs: np.ndarray, ring_coeffs: np.ndarray):
+        """Factorisation of the assembled lined matrix and its scale against the kept one."""
+        from .solver import Factorisation
+
+        coeffs = np.concatenate([np.asarray(ground_coeffs, float).ravel(), np.asarray(ring_coeffs, float).ravel()])
+        if self._lfactor is not None:
+            s = proportion(coeffs, self._lfactor[0])
+            if s is not None and s > 0:
+                return self._lfactor[1], s
+            self._lfactor[1].release()
+        with Stopwatch(self.counters, "seconds_assembling"):
+            K = self._lined_matrix(ground_coeffs, ring_coeffs)
+        with Stopwatch(self.counters, "seconds_factorising"):
+            fact = Factorisation(K, self.backend)
+        self.counters.factorisations += 1
+        self._lfactor = (coeffs, fact)
+        return fact, 1.0
+
+    def release(self) -> None:
+        super().release()
+        if self._lfactor is not None:
+            self._lfactor[1].release()
+        self._lfactor, self._cond, self._sol = None, None, None
+
     # ------------------------------------------------------------------ forward
     def _solution(self, values: Mapping) -> _Solution:
         key = tuple(sorted(values.items()))
@@ -185,13 +260,26 @@ class StagedSimulation(ElasticSimulation):
         Y = np.zeros((self.survey.m, 2))
         Y[:, 0] = P @ w0
         sol = _Solution(key, st, fact, s, coords, f, w0, Y, self.plan.weights(values))
+        if fact is not self._last_ground:
+            self._ground_factors += 1
+            self._last_ground = fact
         if self.lined:
-            cond = self._condensation(fact)
             sol.ring_coeffs = self.ring.coefficients(values).real
-            S = self.ring.condensed(sol.ring_coeffs)
-            sol.interface = _Interface(cond, s, S)
-            sol.z_w = sol.interface.solve(w0[self.ring.wall_dofs])
-            Y[:, 1] = Y[:, 0] - sol.interface.PW @ (S @ sol.z_w)
+            if (self._cond is not None and self._cond.fact is fact) or self._ground_factors <= 1:
+                cond = self._condensation(fact)
+                S = self.ring.condensed(sol.ring_coeffs)
+                sol.interface = _Interface(cond, s, S)
+                sol.z_w = sol.interface.solve(w0[self.ring.wall_dofs])
+                Y[:, 1] = Y[:, 0] - sol.interface.PW @ (S @ sol.z_w)
+            else:  # the ground keeps changing: factorise the lined configuration itself
+                self._cond = None
+                lf, ls = self._lined_factorised(st.coeffs, sol.ring_coeffs)
+                rhs = np.concatenate([f, np.zeros(len(self.ring.i))])
+                wl = self._solve(lf, ls, rhs, coords)
+                sol.direct = (lf, ls, wl)
+                sol.w1 = wl[:self.fe.nfree]
+                sol.z_w = wl[self.ring.wall_dofs]
+                Y[:, 1] = P @ sol.w1
         self._sol = sol
         return sol
 
@@ -205,7 +293,8 @@ class StagedSimulation(ElasticSimulation):
 
     def stage_displacements(self, values: Mapping) -> np.ndarray:
         """u_k on the free dofs after every stage (nstages, nfree)."""
-        sol = self._solution(values)
+        with _sequential_blas():
+            sol = self._solution(values)
         out = np.outer(sol.a[:, 0], sol.w0)
         if self.lined:
             out += np.outer(sol.a[:, 1], self._w1(sol))
@@ -216,6 +305,10 @@ class StagedSimulation(ElasticSimulation):
         return self.stage_displacements(values)[-1]
 
     def _readings(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
+        with _sequential_blas():
+            return self._readings_of(values, wrt)
+
+    def _readings_of(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
         sol = self._solution(values)
         rows = self._row_stage
         x = np.einsum("ic,ic->i", sol.a[rows], sol.Y)
@@ -248,6 +341,11 @@ class StagedSimulation(ElasticSimulation):
         h = COMPLEX_STEP * max(1.0, abs(values[name]))
         v[name] = values[name] + 1j * h
         dcoeffs = self.ring.coefficients(v).imag / h
+        if sol.direct is not None:  # K_L^-1 (-dK_ring w_1) on the assembled system
+            lf, ls, wl = sol.direct
+            n = len(wl)
+            rhs = -self.fe.symmetric_product(self._embed_ring(self.ring.fe.matrix(dcoeffs), n), wl)
+            return self.survey.P @ self._solve(lf, ls, rhs)[:self.fe.nfree]
         mu = self.ring.condensed_derivative(sol.ring_coeffs, dcoeffs) @ sol.z_w
         it = sol.interface
         return self._lined_column(sol, -it.PW @ mu, -it.G @ mu)
@@ -282,6 +380,24 @@ class StagedSimulation(ElasticSimulation):
         out[:, 0, :] = P @ T0
         if not self.lined:
             return out
+        if sol.direct is not None:  # K_L^-1 (df/dv - dK_g/dv w_1) on the assembled system
+            lf, ls, wl = sol.direct
+            n, ni = self.fe.nfree, len(self.ring.i)
+            cols, keys, raws = [], [], []
+            for j, d in enumerate(derivs):
+                r = self.fe.load(d.sigma_v, d.sigma_h)
+                if np.any(d.coeffs):
+                    rhs = r - self.fe.symmetric_product(self.fe.matrix(d.coeffs), sol.w1)
+                    raws.append((j, np.concatenate([rhs, np.zeros(ni)])))
+                else:  # a load only (K0, the release): in the span cache
+                    keys.append((j, np.concatenate([r, np.zeros(ni)]), np.concatenate([d.sigma_v, d.sigma_h])))
+            if keys:
+                T = self._solve(lf, ls, np.column_stack([r for _, r, _ in keys]), np.column_stack([c for _, _, c in keys]))
+                out[:, 1, [j for j, _, _ in keys]] = P @ T[:n]
+            if raws:
+                T = self._solve(lf, ls, np.column_stack([r for _, r in raws]))
+                out[:, 1, [j for j, _ in raws]] = P @ T[:n]
+            return out
         it, U = sol.interface, self.ring.wall_dofs
         lam = it.S @ sol.z_w
         for j, alpha in enumerate(alphas):
@@ -306,13 +422,19 @@ class StagedSimulation(ElasticSimulation):
 
     def _ring_unit(self, sol: _Solution) -> np.ndarray:
         """The ring's dofs (ring-local) per unit release on the lined configuration."""
+        if sol.direct is not None:
+            wl = sol.direct[2]
+            free = wl[self._augmented_index()]
+            return self.ring.fe.expand(free)
+        self.ring.condensed(sol.ring_coeffs)
         return self.ring.ring_displacement(sol.z_w)
 
     def lining_forces(self, values: Mapping) -> LiningForces | None:
         """N, V, M around the lining and its centreline's movement after every stage it acts in."""
         if not self.lined:
             return None
-        sol = self._solution(values)
+        with _sequential_blas():
+            sol = self._solution(values)
         ring = self.ring
         unit = self._ring_unit(sol)
         N1, V1, M1 = ring.section_forces(unit, sol.ring_coeffs)
