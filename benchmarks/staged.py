@@ -8,9 +8,10 @@ mesh cached, one untimed warm-up of everything), each on a fresh simulation (FE 
 nothing factorised):
 
   forward      one staged forward run: x at the case's values, both configurations (the ground; the
-               ground with the lining) factorised as geoback does (ground factor + the lining
-               condensed onto the wall), and the same run with the lined configuration assembled and
-               factorised directly, for reference;
+               ground with the lining) factorised as geoback does (the ground's factor, and its Schur
+               complement on the wall with the lining condensed there), and the same run with the
+               lined configuration assembled and factorised directly; the floor is measured against
+               the cheaper of the two;
   geoback      identify(): Levenberg-Marquardt with exact sensitivities through the stages;
   scipy        scipy.optimize.least_squares(jac='2-point', method='trf') on the same whitened
                residuals in the same scaled variables, every call on a freshly factorised model (what
@@ -128,7 +129,8 @@ def main(argv: list[str] | None = None) -> dict:
     fd = forward(loaded, direct=True)
     g = run_geoback(loaded)
     s = run_scipy(loaded)
-    ratio = g["seconds"] / f["seconds"]
+    cheapest = min(f["seconds"], fd["seconds"])  # the floor is against the cheaper way to run forward once
+    ratio = g["seconds"] / cheapest
     d = np.sqrt(np.diag(g["covariance"]))
     cov_diff = float(np.linalg.norm((s["covariance"] - g["covariance"]) / np.outer(d, d))
                      / np.linalg.norm(g["covariance"] / np.outer(d, d)))
@@ -140,7 +142,8 @@ def main(argv: list[str] | None = None) -> dict:
         ("preparing a simulation (FE model, lining ring, instruments) [s]", round(f["setup"], 2)),
         ("one staged forward run [s]", round(f["seconds"], 3)),
         ("  its factorisations / solves", f"{f['factorisations']} / {f['solves']}"),
-        ("  of which factorising (ground factor + lining condensed on the wall) [s]", round(f["factor_seconds"], 3)),
+        ("  of which factorising (ground factor; wall Schur complement + readings' back-substitutions) [s]",
+         round(f["factor_seconds"], 3)),
         ("one staged forward run, lined configuration factorised directly [s]", round(fd["seconds"], 3)),
         ("  its factorisations / solves", f"{fd['factorisations']} / {fd['solves']}"),
         ("  readings equal to the condensed run (max relative difference)",
@@ -153,7 +156,8 @@ def main(argv: list[str] | None = None) -> dict:
         ("  factorisations / solves / fun calls / nfev / njev",
          f"{s['factorisations']} / {s['solves']} / {s['calls']} / {s['nfev']} / {s['njev']}"),
         ("  estimate", f"{est(s)} (success={s['success']})"),
-        ("ratio identification / one staged forward run", round(ratio, 2)),
+        ("ratio identification / one staged forward run (the cheaper of the two)", round(ratio, 2)),
+        ("ratio identification / one staged forward run as geoback does it", round(g["seconds"] / f["seconds"], 2)),
         ("ratio least_squares / identification (time)", round(s["seconds"] / g["seconds"], 1)),
         ("ratio least_squares / identification (factorisations)", round(s["factorisations"] / g["factorisations"], 1)),
         ("C_p vs least_squares inv(J^t J): standardised relative Frobenius", f"{cov_diff:.1e}"),

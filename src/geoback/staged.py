@@ -32,7 +32,7 @@ Sensitivities (eqn 34, per configuration) dw_c/dv = K_c^-1 (df/dv - dK_c/dv w_c)
 - ground values: dK_1/dv = dK_g/dv; when dK_g/dv = alpha K_g (a modulus scaling K_g, eqn 42),
   K_g^-1 dK_g/dv w_1 = alpha (w_0 - W lambda) with lambda = S z_w, W = K_g^-1 U: no back-substitution;
   otherwise dK_g/dv w_1 is formed (one back-substitution for w_1, one per value);
-- the lining's values: dK_1/dv = U dS/dv U^t, dS exact (lining.py): PW and G serve, no sparse work;
+- the lining's values: dK_1/dv = U dS/dv U^t, dS exact (lining.py): PW and Sigma serve, no sparse work;
 - beta[stage]: only the weights a_kc change (linear).
 """
 from __future__ import annotations
@@ -53,7 +53,6 @@ from .lining import LiningForces, RingModel
 from .mesh import Mesh
 from .simulation import Field, Prediction, Stopwatch
 
-CHUNK = 64  # wall dofs back-substituted together when the wall flexibility is formed
 _OPENBLAS = None
 
 
@@ -71,34 +70,35 @@ def _sequential_blas():
 
 @dataclass
 class _Condensation:
-    """The lined configuration's factorised form for one ground factorisation (reference scale)."""
+    """The lined configuration's factorised form for one ground factorisation (reference scale):
+    the ground's Schur complement on the wall dofs and the readings' view of the wall."""
 
     fact: object
     PW: np.ndarray  # P K_ref^-1 U  (readings x wall dofs)
-    G: np.ndarray  # U^t K_ref^-1 U
-    L: np.ndarray  # Cholesky factor of G
+    Sigma: np.ndarray  # K_WW - K_WI K_II^-1 K_IW of K_ref = (U^t K_ref^-1 U)^-1
 
 
 class _Interface:
-    """(I + G S) z = q for the lined configuration at ground scale s (G = G_ref / s)."""
+    """The lined solve at ground scale s: with Sigma_s = s Sigma_ref and the lining's S on the wall,
+    (I + G S) z = q  <=>  (Sigma_s + S) z = Sigma_s q  (SPD, one dense Cholesky per values)."""
 
     def __init__(self, cond: _Condensation, s: float, S: np.ndarray):
         self.cond, self.s, self.S = cond, s, S
-        M = np.eye(len(S)) + cond.L.T @ S @ cond.L / s
+        self.Sigma = s * cond.Sigma
+        M = self.Sigma + S
         self.chol = sla.cho_factor(0.5 * (M + M.T), lower=True, check_finite=False)
 
     def solve(self, q: np.ndarray) -> np.ndarray:
-        L = self.cond.L
-        y = sla.solve_triangular(L, q, lower=True, check_finite=False)
-        return L @ sla.cho_solve(self.chol, y, check_finite=False)
+        """z_w for a ground-side solution with wall values q (= U^t K_g^-1 rhs)."""
+        return self.solve_sigma(self.Sigma @ q)
+
+    def solve_sigma(self, sq: np.ndarray) -> np.ndarray:
+        """z_w from Sigma_s q (avoids G = Sigma^-1 where Sigma_s q is known directly)."""
+        return sla.cho_solve(self.chol, sq, check_finite=False)
 
     @property
     def PW(self) -> np.ndarray:
         return self.cond.PW / self.s
-
-    @property
-    def G(self) -> np.ndarray:
-        return self.cond.G / self.s
 
 
 @dataclass
@@ -140,6 +140,7 @@ class StagedSimulation(ElasticSimulation):
         self._row_stage = np.array([index[lab.stage] for lab in self.survey.labels], np.int64)
         self._cond: _Condensation | None = None
         self._lfactor: tuple | None = None  # (coefficients, Factorisation) of the assembled lined matrix
+        self._wall_order: np.ndarray | None = None  # ground dofs, the wall's last (for its Schur complement)
         self._ground_factors = 0  # distinct ground factorisations met (condensation pays only while 1)
         self._last_ground = None
         self._sol: _Solution | None = None
@@ -171,26 +172,46 @@ class StagedSimulation(ElasticSimulation):
 
     # ------------------------------------------------------------------ the lined configuration
     def _condensation(self, fact) -> _Condensation:
-        """G = U^t K^-1 U and PW = P K^-1 U for the ground's current factorisation (reference scale)."""
+        """Sigma and PW for the ground's current factorisation (reference coefficients)."""
         if self._cond is not None and self._cond.fact is fact:
             return self._cond
-        U = self.ring.wall_dofs
-        nw, m = len(U), self.survey.m
-        PW, G = np.empty((m, nw)), np.empty((nw, nw))
         t0 = time.perf_counter()
-        for start in range(0, nw, CHUNK):
-            cols = U[start:start + CHUNK]
-            E = np.zeros((self.fe.nfree, len(cols)))
-            E[cols, np.arange(len(cols))] = 1.0
-            X = self._solve(fact, 1.0, E)
-            PW[:, start:start + len(cols)] = self.survey.P @ X
-            G[:, start:start + len(cols)] = X[U]
-        G = 0.5 * (G + G.T)
-        L = np.linalg.cholesky(G)
+        U = self.ring.wall_dofs
+        Sigma = self._wall_schur(self._factor[0])
+        P = self.survey.P
+        if P.shape[0] <= len(U):  # PW = (K^-1 P^t)^t U: one back-substitution per reading
+            PW = np.asarray(self._solve(fact, 1.0, np.asarray(P.T.todense()))[U]).T
+        else:  # or one per wall dof
+            E = np.zeros((self.fe.nfree, len(U)))
+            E[U, np.arange(len(U))] = 1.0
+            PW = np.asarray(P @ self._solve(fact, 1.0, E))
         self.counters.factorisations += 1
         self.counters.seconds_factorising += time.perf_counter() - t0
-        self._cond = _Condensation(fact, PW, G, L)
+        self._cond = _Condensation(fact, PW, Sigma)
         return self._cond
+
+    def _wall_schur(self, coeffs: np.ndarray) -> np.ndarray:
+        """The ground's Schur complement on the wall dofs: the trailing block L_WW U_WW of a sparse
+        LU of K_g with the wall dofs last (SuperLU, symmetric mode, diagonal pivots; the interior
+        in a fill-reducing order found once per mesh)."""
+        import scipy.sparse as sp
+        import scipy.sparse.linalg as spla
+
+        upper = self.fe.matrix(coeffs)
+        K = (upper + sp.triu(upper, k=1).T).tocsc()
+        n, U = K.shape[0], self.ring.wall_dofs
+        nw = len(U)
+        options = dict(diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        if self._wall_order is None:
+            inner = np.setdiff1d(np.arange(n), U)
+            lu = spla.splu(K[inner][:, inner], permc_spec="MMD_AT_PLUS_A", **options)
+            self._wall_order = np.concatenate([inner[np.argsort(lu.perm_c)], U])
+        order = self._wall_order
+        lu = spla.splu(K[order][:, order].tocsc(), permc_spec="NATURAL", **options)
+        if np.any(lu.perm_r != np.arange(n)) or np.any(lu.perm_c != np.arange(n)):
+            raise RuntimeError("SuperLU reordered the wall-last matrix: the trailing block is no Schur complement")
+        Sigma = (lu.L.tocsc()[n - nw:, n - nw:] @ lu.U.tocsr()[n - nw:, n - nw:]).toarray()
+        return 0.5 * (Sigma + Sigma.T)
 
     def _augmented_index(self) -> np.ndarray:
         """Ring free dof -> unknown of the assembled lined system (ground free dofs, then inner ring)."""
@@ -327,10 +348,10 @@ class StagedSimulation(ElasticSimulation):
                 A[:, j] = np.einsum("ic,ic->i", sol.a[rows], dY[:, :, k])
         return Prediction(x, A)
 
-    def _lined_column(self, sol: _Solution, Pt: np.ndarray, Ut: np.ndarray) -> np.ndarray:
-        """P K_1^-1 q from P K_g^-1 q and U^t K_g^-1 q (the interface equations)."""
+    def _lined_column(self, sol: _Solution, Pt: np.ndarray, SUt: np.ndarray) -> np.ndarray:
+        """P K_1^-1 q from P K_g^-1 q and Sigma U^t K_g^-1 q (the interface equations)."""
         it = sol.interface
-        z = it.solve(Ut)
+        z = it.solve_sigma(SUt)
         return Pt - it.PW @ (it.S @ z)
 
     def _lining_column(self, sol: _Solution, values: Mapping, name: str) -> np.ndarray:
@@ -347,8 +368,8 @@ class StagedSimulation(ElasticSimulation):
             rhs = -self.fe.symmetric_product(self._embed_ring(self.ring.fe.matrix(dcoeffs), n), wl)
             return self.survey.P @ self._solve(lf, ls, rhs)[:self.fe.nfree]
         mu = self.ring.condensed_derivative(sol.ring_coeffs, dcoeffs) @ sol.z_w
-        it = sol.interface
-        return self._lined_column(sol, -it.PW @ mu, -it.G @ mu)
+        it = sol.interface  # q = -U mu: P K_g^-1 q = -PW mu, Sigma U^t K_g^-1 q = -mu
+        return self._lined_column(sol, -it.PW @ mu, -mu)
 
     def _ground_columns(self, sol: _Solution, values: Mapping, names: list[str]) -> np.ndarray:
         """d(P w_c)/dv (m, 2, len(names)) for ground values (eqns 34-42 for each configuration)."""
@@ -404,14 +425,14 @@ class StagedSimulation(ElasticSimulation):
             if alpha is None:
                 continue  # below
             Pt = out[:, 0, j] + alpha * (it.PW @ lam)  # K_g^-1 (df/dv - alpha K_g w_1) = t_0 + alpha W lambda
-            Ut = T0[U, j] + alpha * (it.G @ lam)
-            out[:, 1, j] = self._lined_column(sol, Pt, Ut)
+            SUt = it.Sigma @ T0[U, j] + alpha * lam  # Sigma U^t W lambda = lambda
+            out[:, 1, j] = self._lined_column(sol, Pt, SUt)
         if lined_raw:
             w1 = self._w1(sol)
             rhs = np.column_stack([r - self.fe.symmetric_product(dK, w1) for _, r, dK in lined_raw])
             T1 = self._solve(fact, s, rhs)
             for k, (j, _, _) in enumerate(lined_raw):
-                out[:, 1, j] = self._lined_column(sol, P @ T1[:, k], T1[U, k])
+                out[:, 1, j] = self._lined_column(sol, P @ T1[:, k], it.Sigma @ T1[U, k])
         return out
 
     # ------------------------------------------------------------------ fields and the lining
