@@ -9,7 +9,7 @@ needs no new element type, no rotational dofs and no shear- or membrane-locking 
 stage that activates elements is the same mechanism an elastoplastic simulation or a heading and
 bench sequence needs. N, V and M are stress resultants over the thickness, averaged over each
 sector from the elements' quadrature points; the tests check them against closed-form thick-ring
-solutions (thrust and moment within 1e-3 at the default wall element size R/8 ... R/16).
+solutions (thrust within 1.5e-3, moment within 6e-3 of its largest value, walls of R/16 elements).
 
 Numerics. The ring is structured: `layers` elements through the thickness, one sector per wall
 edge, each sector-layer quad (nine P2 nodes on circles) split into two P2 triangles. Only the
