@@ -4,7 +4,8 @@
 
 The same figures as `geoback run cases/tunnel-paper.yaml --plots` (PNG only), plus the objective
 and the information density with the identity weighting of the paper's synthetic example (C_x = I,
-eqn 8; its Figs. 2 and 5).
+eqn 8; its Figs. 2 and 5), and the lining and per-stage instrument figures of the staged case
+(cases/staged-tunnel.yaml).
 """
 from pathlib import Path
 
@@ -15,6 +16,7 @@ from geoback.identification import identify, prepare
 
 HERE = Path(__file__).resolve().parent
 CASE = HERE.parents[1] / "cases" / "tunnel-paper.yaml"
+STAGED = HERE.parents[1] / "cases" / "staged-tunnel.yaml"
 
 
 def figures(analysis, weighting=None, names=plots.FIGURES):
@@ -28,6 +30,9 @@ def main() -> None:
     paths = plots.save_figures(figures(analysis), HERE, formats=("png",))
     ident = figures(analysis, "identity", ("objective_contours", "information_density"))
     paths += plots.save_figures({f"{k}_identity": v for k, v in ident.items()}, HERE, formats=("png",))
+    staged = figures(prepare(load_case(STAGED)), None, ("instruments", "lining"))
+    paths += plots.save_figures({"lining": staged["lining"], "instruments_staged": staged["instruments"]}, HERE,
+                                formats=("png",))
     for p in paths:
         print(f"{p.relative_to(HERE.parents[1])}  {p.stat().st_size // 1024} KB")
 

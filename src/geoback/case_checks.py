@@ -247,6 +247,9 @@ def physical_problems(case: Case, allow_large: bool = False) -> list[tuple[tuple
         if p.log and p.initial <= 0:
             problems.append((("parameters", i, "initial"),
                              f"expected a positive initial value for a log-transformed parameter, found {_g(p.initial)}"))
+    from .construction import construction_problems
+
+    problems.extend(construction_problems(case))
     pnames = [p.name for p in case.parameters]
     for i, n in enumerate(pnames):
         if pnames.index(n) != i:

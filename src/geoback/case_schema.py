@@ -333,6 +333,38 @@ class FitSettings(Strict):
                              "'include' adds it to C_x and fits again; 'ignore' skips the check")
 
 
+class Lining(Strict):
+    """An elastic lining: a ring of its real thickness inside the excavated boundary (meshed with
+    `layers` quadratic elements through the thickness), installed stress-free at a stage."""
+
+    name: str = Field("lining", pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$",
+                      description="name of the lining (its parameters are E[name] and nu[name])")
+    thickness: Positive = Field(description="thickness of the lining [m]; its outer face is the excavated wall")
+    E: Stress = Field(gt=0, description="Young's modulus of the lining [kPa] (or '30 GPa')")
+    nu: Num = Field(ge=0.0, lt=0.5, description="Poisson's ratio of the lining, 0 <= nu < 0.5")
+    layers: Annotated[int, BeforeValidator(_whole), Field(ge=1, le=8)] = Field(
+        2, description="quadratic elements through the lining's thickness (bending needs at least 2)")
+
+
+class Stage(Strict):
+    """One construction step. In a stage the lining named by `install` is placed first (stress-free,
+    on the wall as it has moved so far), then the in-situ stress on the tunnel wall is released up to
+    the cumulative fraction `release`."""
+
+    name: StageName = Field(description="stage name (readings are tagged with it)")
+    release: Optional[Annotated[float, BeforeValidator(_number), Field(gt=0.0, le=1.0)]] = Field(
+        None, description="cumulative fraction of the in-situ stress on the tunnel wall released by the end of "
+                          "this stage (beta_k, 0 < beta <= 1, increasing from stage to stage)")
+    install: Optional[str] = Field(None, description="name of the lining installed at the start of this stage")
+
+
+class Construction(Strict):
+    """Staged construction (convergence-confinement): stress released in steps, a lining between them."""
+
+    lining: Optional[Lining] = Field(None, description="the lining (installed by a stage's 'install')")
+    stages: list[Stage] = Field(min_length=1, description="construction stages in order")
+
+
 class Output(Strict):
     dir: Optional[str] = Field(None, description="results directory (default results/<name>)")
     vtu: Annotated[bool, BeforeValidator(_flag)] = True
@@ -345,6 +377,8 @@ class Case(Strict):
     ground: Ground
     mesh: MeshSettings = MeshSettings()
     instruments: list[Instrument] = Field(default_factory=list)
+    construction: Optional[Construction] = Field(
+        None, description="construction stages (release fractions, a lining); default: one excavation step")
     error_scales: list[ErrorScale] = Field(
         default_factory=list, description="instruments whose stated sigma is known only up to a factor "
                                           "(estimated with the parameters); the others' sigma is taken as exact")

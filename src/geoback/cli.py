@@ -169,7 +169,9 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
             raise GeobackError(f"--refine must be at least 1 (a mesh finer than the case's), found {factor:g}")
         if readings_out is None:
             _out_dir(loaded, out)
-        readings = synthetic_readings(loaded, factor, assignments, noise_seed=seed if noise else None)
+        staged = loaded.case.construction is not None
+        readings = synthetic_readings(loaded, factor, assignments, noise_seed=seed if noise else None,
+                                      by_stage=staged)
         target = readings_out or _out_dir(loaded, out) / "readings.csv"
         used = ", ".join(f"{k} = {v}" for k, v in assignments.items()) or "the case's values"
         mesh = "the case's mesh (inverse crime: fitting these readings on it proves little)" if factor == 1 else \
@@ -177,7 +179,8 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
         notes = [f"geoback simulate {case.name}: {used}; {mesh}" + (f"; noise from each C_x, seed {seed}" if noise
                                                                     else "; no noise")]
         write_readings_csv(loaded, readings, target, notes)
-        typer.echo(f"{sum(len(v) for v in readings.values())} readings ({used}; {mesh}"
+        count = sum(len(v) for sets in readings.values() for v in (sets.values() if staged else [sets]))
+        typer.echo(f"{count} readings ({used}; {mesh}"
                    f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
         return
     if refine not in (None, 1.0):
@@ -190,7 +193,8 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
     res = run_simulation(analysis, folder, values=values, vtu=vtu and loaded.case.output.vtu)
     used = ", ".join(f"{k} = {v}" for k, v in assignments.items())
     typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs"
-               f"{' with ' + used if used else ''} -> {folder}/predicted.csv")
+               f"{' with ' + used if used else ''} -> {folder}/predicted.csv"
+               + (", lining.csv, lining.png" if res.get("lining") is not None else ""))
 
 
 @app.command()

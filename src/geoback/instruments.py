@@ -223,8 +223,24 @@ class Survey:
         return -self.G[:, self.constant_names.index(name)]
 
 
+def stage_constants(blocks: list[InstrumentBlock]) -> list[InstrumentBlock]:
+    """An instrument read at several construction stages has integration constants per survey (each
+    survey's reference end has its own error or movement): A[X1] becomes A[X1.stage] on each."""
+    count: dict[str, int] = {}
+    for b in blocks:
+        for n in b.constant_names:
+            count[n] = count.get(n, 0) + 1
+    out = []
+    for b in blocks:
+        if any(count[n] > 1 for n in b.constant_names):
+            b = replace(b, constant_names=[f"{n[:-1]}.{b.stage}]" if count[n] > 1 else n for n in b.constant_names])
+        out.append(b)
+    return out
+
+
 def build_survey(blocks: list[InstrumentBlock], fe) -> Survey:
     """The observation operator of `blocks` on the FE model `fe` (shape-function interpolation)."""
+    blocks = stage_constants(blocks)
     all_pts = np.vstack([b.points for b in blocks])
     Ix, Iy = fe.interpolation(all_pts)
     rows, Gs, names, labels = [], [], [], []

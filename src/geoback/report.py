@@ -15,8 +15,13 @@ from .outputs import write_atomic, write_csv, write_json, write_matrix_csv
 from .resultsets import result_set
 
 
-def reading_label(lab) -> str:
-    return f"{lab.instrument}:{lab.station}:{lab.component}"
+def reading_label(lab, staged: bool = False) -> str:
+    """instrument:station:component, and @stage when readings come from several construction stages."""
+    return f"{lab.instrument}:{lab.station}:{lab.component}" + (f"@{lab.stage}" if staged else "")
+
+
+def several_stages(labels) -> bool:
+    return len({lab.stage for lab in labels}) > 1
 
 
 def summary(res, exploration=None) -> dict:
@@ -111,7 +116,8 @@ def report_text(res) -> str:
                                                            if res.mesh_error_included else "")]
     top = np.argsort(-rel.leverage)[:3]
     lines += ["", "Most informative readings (leverage = diag Q): " +
-              ", ".join(f"{reading_label(res.data.labels[i])} ({rel.leverage[i]:.2f})" for i in top)]
+              ", ".join(f"{reading_label(res.data.labels[i], several_stages(res.data.labels))} "
+                        f"({rel.leverage[i]:.2f})" for i in top)]
     return "\n".join(lines) + "\n"
 
 
@@ -150,12 +156,17 @@ def error_scale_lines(rel) -> list[str]:
 
 
 def write_field(field, path: Path) -> None:
-    """Displacement (point data) and cell data (stresses, ...) as VTU for ParaView."""
+    """Displacement (point data) and cell data (stresses, ...) as VTU for ParaView; more point data
+    (the displacement after every construction stage) if the field has it."""
     from .mesh import write_mesh
 
-    disp = field.displacement
-    write_mesh(field.mesh, path, point_data={"displacement": np.column_stack([disp, np.zeros(len(disp))])},
-               cell_data=field.cell_data)
+    def vec(v):
+        v = np.asarray(v)
+        return np.column_stack([v, np.zeros(len(v))]) if v.ndim == 2 and v.shape[1] == 2 else v
+
+    point = {"displacement": vec(field.displacement)}
+    point.update({k: vec(v) for k, v in getattr(field, "point_data", {}).items()})
+    write_mesh(field.mesh, path, point_data=point, cell_data=field.cell_data)
 
 
 def write_run(res, out: Path, exploration=None, plots: bool = False) -> None:
@@ -179,7 +190,8 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
     write_matrix_csv(out / "correlation.csv", names, rel.correlation)
     write_csv(out / "eigen.csv", ["index", "singular_value"] + [f"v_{n}" for n in names],
               [[i + 1, rel.singular_values[i]] + list(rel.directions[:, i]) for i in range(len(rel.singular_values))])
-    labels = [reading_label(lab) for lab in res.data.labels]
+    staged = several_stages(res.data.labels)
+    labels = [reading_label(lab, staged) for lab in res.data.labels]
     write_matrix_csv(out / "information_density.csv", labels, rel.information_density)
     measured = res.data.measured
     residual = measured - f.x
@@ -193,6 +205,10 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
               [[h.k, h.mu, h.J] + list(h.p) + [h.accepted] for h in f.history])
     if exploration is not None and exploration.field is not None:
         write_field(exploration.field, out / "field.vtu")
+    if exploration is not None and getattr(exploration, "lining", None) is not None:
+        from .lining import write_lining
+
+        write_lining(exploration.lining, out, vtu=exploration.field is not None)
     if plots:
         from .plots import plot_run
 

@@ -22,6 +22,9 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
     res = identify(analysis, method=method, progress=progress, profile=profile, mesh_error=None)
     vtu = loaded.case.output.vtu if vtu is None else vtu
     what = ("field",) if vtu else ()
+    construction = loaded.case.construction
+    if construction is not None and construction.lining is not None:
+        what += ("lining",)  # thrust and moments around the lining: lining.csv, lining.vtu, the figure
     if plots:
         from .plots import exploration_for
 

@@ -51,11 +51,13 @@ class Prediction:
 
 @dataclass(frozen=True)
 class Field:
-    """A solution on the mesh, for outputs: nodal displacement (N, 2) and cell data by name."""
+    """A solution on the mesh, for outputs: nodal displacement (N, 2), cell data by name and more
+    point data by name (e.g. the displacement after every construction stage)."""
 
     mesh: object
     displacement: np.ndarray
     cell_data: dict = field(default_factory=dict)
+    point_data: dict = field(default_factory=dict)
 
 
 def is_constant(name: str) -> bool:
@@ -120,6 +122,17 @@ class Simulation(ABC):
     def displacements_at(self, values: Mapping, points: np.ndarray) -> np.ndarray:
         """(ux, uy) at points (k, 2) of the ground; ValueError for a point outside it."""
 
+    def stage_displacements_at(self, values: Mapping, points: np.ndarray, stage: str) -> np.ndarray:
+        """(ux, uy) at points accumulated up to construction stage `stage`."""
+        if stage != self.stages[-1]:
+            raise ValueError(f"this simulation computes stage '{self.stages[-1]}' only, not '{stage}'")
+        return self.displacements_at(values, points)
+
+    def lining_forces(self, values: Mapping):
+        """Thrust, shear and bending moment around the lining per stage (``lining.LiningForces``);
+        None for a model without a lining."""
+        return None
+
     def predict(self, values: Mapping, wrt: Sequence[str] = (), sensitivities: bool = False) -> Prediction:
         """Readings at `values` (constants A-D default to 0); with `sensitivities`, A = dx/d(wrt)."""
         physical = [n for n in wrt if not is_constant(n)] if sensitivities else []
@@ -161,10 +174,15 @@ class Stopwatch:
 
 def make_simulation(loaded, mesh=None, backend: str | None = None, blocks=None, extensions=None) -> Simulation:
     """The simulation a case asks for, with the extension table of `geoback diagnose` available
-    (``diagnosis/extensions.py``) unless another table is given. Today: the one-step
-    linear-elastic excavation."""
+    (``diagnosis/extensions.py``) unless another table is given: the one-step linear-elastic
+    excavation, or the staged one (``staged.py``) when the case has a construction section."""
     from .diagnosis.extensions import EXTENSIONS
     from .elastic import ElasticSimulation
 
+    if loaded.case.construction is not None:
+        from .staged import StagedSimulation
+
+        return StagedSimulation(loaded, mesh=mesh, blocks=blocks, backend=backend,
+                                extensions=EXTENSIONS if extensions is None else extensions)
     return ElasticSimulation(loaded, mesh=mesh, blocks=blocks, backend=backend,
                              extensions=EXTENSIONS if extensions is None else extensions)
