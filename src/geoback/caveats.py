@@ -16,6 +16,7 @@ and a sentence that says what was found and what to check. Codes:
 | `exactly-determined` | as many readings as parameters: χ² cannot test the model |
 | `mesh-error` | the mesh's discretisation error on a reading above 0.3 of its sigma |
 | `error-scale` | an estimated error scale beyond what the case allows for it (its prior, or the other instruments) |
+| `forecast-nonlinear` | a forecast's linearised 95 % band and the range sampled through the model differ by more than 10 % |
 """
 from __future__ import annotations
 

@@ -173,6 +173,8 @@ class Identification:
     caveats: tuple = ()  # what not to trust, in words and codes (geoback.caveats)
     mesh_error: object = None  # geoback.mesh_error.MeshError, if checked
     mesh_error_included: bool = False  # its variance added to C_x before the final fit
+    forecasts: object = None  # geoback.forecast.Forecasts at the estimate, if the case asks for any
+    prior_posterior: object = None  # geoback.identifiability.PriorPosterior: what the readings add to a prior
 
     @property
     def status(self) -> str:
@@ -296,11 +298,14 @@ def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, se
     if settings is not None and profile != "none" and result.status == "converged" and result.moved:
         profiled = _profiles(misfit, settings, result, rel, limits, profile == "all")
     caveats = tuple(notices) + tuple(fit_caveats(result, rel, misfit.parameters, limits, profiled))
+    from .identifiability import prior_posterior
+
     return Identification(
         case, case_hash, misfit.parameters, result, rel, misfit.data, misfit.weighting,
         {k: counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}, dict(seconds),
         getattr(sim, "dofs", 0), len(getattr(sim.mesh, "triangles", ())), getattr(sim, "solver", None),
-        standardised, profiled, caveats)
+        standardised, profiled, caveats,
+        prior_posterior=prior_posterior(rel.information, misfit.parameters, result.p, limits))
 
 
 def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability, limits, every: bool) -> dict:

@@ -53,6 +53,7 @@ class Reliability:
     stated_residual: np.ndarray | None = None  # L^-1 (x* - x) with the stated C_x
     stated_J: float = float("nan")  # J with every scale at 1 (data and priors)
     log: np.ndarray | None = None  # parameters identified as ln p: their intervals are made in log space
+    information: np.ndarray | None = None  # A'^t A' of the readings alone (no prior rows), physical units
 
     @property
     def reduced_chi2(self) -> float:
@@ -147,7 +148,7 @@ def assess(ev, params, logdet: float) -> Reliability:
     if state is None:
         rel = Reliability(list(names), p, Cp, std, corr, s, Vt.T, cond, Q, leverage, rw.copy(), chi2, dof,
                           pval, float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined,
-                          log=np.asarray(params.log, bool))
+                          log=np.asarray(params.log, bool), information=Aw.T @ Aw)
         rel.total_dof, rel.stated_residual, rel.stated_J = dof, rel.whitened_residual, chi2
         if groups:  # what each instrument's readings say about its stated sigma
             known = sc.profile_state(groups, rw, np.zeros(len(groups)))
@@ -197,6 +198,6 @@ def _assess_with_scales(ev, params, logdet, groups, state, names, p, Cp, std, co
     rel = Reliability(list(names), p, Cp, std, corr, s, V, cond, Q, leverage, rw.copy(), chi2, dof, pval,
                       float(m2logL), float(m2logL + 2 * k), float(m2logL + k * np.log(m)), undetermined,
                       estimates, pdof, edof, total_dof, stated, float(stated @ stated + prior_r @ prior_r),
-                      log=np.asarray(params.log, bool))
+                      log=np.asarray(params.log, bool), information=B.T @ B)
     return rel
 

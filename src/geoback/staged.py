@@ -171,13 +171,33 @@ class StagedSimulation(ElasticSimulation):
         return self.ring is not None and 1 in self.plan.configurations
 
     # ------------------------------------------------------------------ the lined configuration
+    SURVEY_CACHES = ("_row_stage", "_sol", "_cond")
+
+    def _survey_changed(self, saved: dict) -> None:
+        index = {n: k for k, n in enumerate(self.plan.names)}
+        self._row_stage = np.array([index[lab.stage] for lab in self.survey.labels], np.int64)
+        self._sol = None
+        cond = saved["_cond"]
+        if cond is not None and self._factor is not None and cond.fact is self._factor[1]:
+            self._cond = _Condensation(cond.fact, self._wall_view(cond.fact), cond.Sigma)  # the wall's Schur kept
+        else:
+            self._cond = None
+
     def _condensation(self, fact) -> _Condensation:
         """Sigma and PW for the ground's current factorisation (reference coefficients)."""
         if self._cond is not None and self._cond.fact is fact:
             return self._cond
         t0 = time.perf_counter()
-        U = self.ring.wall_dofs
         Sigma = self._wall_schur(self._factor[0])
+        PW = self._wall_view(fact)
+        self.counters.factorisations += 1
+        self.counters.seconds_factorising += time.perf_counter() - t0
+        self._cond = _Condensation(fact, PW, Sigma)
+        return self._cond
+
+    def _wall_view(self, fact) -> np.ndarray:
+        """PW = P K_ref^-1 U: the readings' view of the wall dofs."""
+        U = self.ring.wall_dofs
         P = self.survey.P
         if P.shape[0] <= len(U):  # PW = (K^-1 P^t)^t U: one back-substitution per reading
             PW = np.asarray(self._solve(fact, 1.0, np.asarray(P.T.todense()))[U]).T
@@ -185,10 +205,7 @@ class StagedSimulation(ElasticSimulation):
             E = np.zeros((self.fe.nfree, len(U)))
             E[U, np.arange(len(U))] = 1.0
             PW = np.asarray(P @ self._solve(fact, 1.0, E))
-        self.counters.factorisations += 1
-        self.counters.seconds_factorising += time.perf_counter() - t0
-        self._cond = _Condensation(fact, PW, Sigma)
-        return self._cond
+        return PW
 
     def _wall_schur(self, coeffs: np.ndarray) -> np.ndarray:
         """The ground's Schur complement on the wall dofs: the trailing block L_WW U_WW of a sparse
