@@ -441,3 +441,18 @@ def test_diagnose_null_case_with_a_free_scale_is_adequate(tmp_path):
     d = diagnose(load_case(_concealed_with_scales(tmp_path, "null-1", [{"instruments": ["I1"]}])))
     assert d.adequate_before and not d.accepted
     assert d.rounds[0].scales[0].estimated
+
+
+def test_shipped_error_scales_case_says_what_its_comment_says():
+    """cases/tunnel-paper-error-scales.yaml (X1 read three times less accurately than stated): I1's
+    scale is consistent with 1, X1's is not and its interval holds 3; with every instrument's scale
+    estimated the fit is not called exactly determined (12 readings, 2 parameters)."""
+    from conftest import CASES
+
+    res = identify(prepare(load_case(CASES / "tunnel-paper-error-scales.yaml")))
+    i1, x1 = (next(e for e in res.reliability.error_scales if e.name == n) for n in ("I1", "X1"))
+    assert i1.low < 1.0 < i1.high and i1.p_stated > 0.05
+    assert x1.low < 3.0 < x1.high and x1.low > 1.0 and x1.p_stated < 1e-3
+    codes = [c.code for c in res.caveats]
+    assert "exactly-determined" not in codes and "error-scale" in codes
+    assert abs(res["E[clay]"].value - 1e4) < 2 * res["E[clay]"].std

@@ -52,7 +52,7 @@ def fit_caveats(fit, rel, params, limits, profiled: dict) -> list[Caveat]:
     if not fit.moved:
         out.append(Caveat("did-not-move", "the fit stopped without moving from the initial values: no step "
                                           "decreased J (check the initial values and bounds; try --method lm)"))
-    if rel.dof == 0:
+    if rel.total_dof == 0:  # (rel.dof is 0 too when every instrument's scale is estimated: not this)
         out.append(Caveat("exactly-determined", "as many readings as parameters: the fit is exact and chi-square "
                                                 "cannot test the model"))
     elif rel.dof > 0 and rel.p_value < ALPHA:
