@@ -19,8 +19,9 @@ when psi != phi), starting with the tangent of the last converged state, until
     || R ||_2  <=  tol || lambda_{n+1} f ||_2          (tol = 1e-10 by default).           (2)
 
 A Newton that fails (``max_iterations`` reached, residual not finite or growing 1e6-fold) is
-retried with half the increment (adaptive schedule) down to ``min_increment``; a fixed
-schedule, a too small increment or ``max_increments`` attempts raise :class:`NonConvergence`
+retried with half the increment (adaptive schedule, or a fixed one with ``refine``) down to
+``min_increment``; a fixed schedule without ``refine``, a too small increment or
+``max_increments`` attempts raise :class:`NonConvergence`
 naming the increment, lambda and the residual - never a silent result. After a quick
 convergence (<= ``fast`` iterations) the next increment grows by ``growth``, up to
 ``max_increment`` (fractions of the final lambda).
@@ -43,7 +44,8 @@ and differentiating (1) at the converged increment,
 
 with K_t the consistent tangent at the converged state (factorised once there; it also serves
 as the first Newton matrix of the next increment), so every parameter costs one
-back-substitution per increment. e_{n+1} is one complex-step evaluation of the return mapping
+back-substitution per increment. A run without sensitivities does not factorise the converged
+tangent: the last Newton matrix (the tangent one iterate earlier) starts the next increment. e_{n+1} is one complex-step evaluation of the return mapping
 per parameter (exact to rounding); the history d sigma_n/dp starts at d sigma0/dp. The result
 is the exact derivative of the discrete solution for the schedule used: finite differences
 must replay that schedule (``Options(schedule=result.schedule)``).
@@ -85,20 +87,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import GeobackError
+from ..errors import ForwardFailure
 from . import mohr_coulomb as mc
 from .linear import LU, Counters, SingularMatrix
 from .mohr_coulomb import Material
 from .operators import PointOperators
 
 
-class NonConvergence(GeobackError):
+class NonConvergence(ForwardFailure):
     """The global Newton failed; carries the increment number, lambda and the residual."""
 
     def __init__(self, increment: int, stage: int, lam_from: float, lam_to: float, residual: float,
                  iterations: int, reason: str, tol: float):
         self.increment, self.stage, self.lam, self.residual = increment, stage, lam_to, residual
         self.iterations, self.reason = iterations, reason
+        self.counters = None  # the run's Counters, attached by solve()
         super().__init__(
             f"elastoplastic solution failed in increment {increment} (stage {stage}, lambda {lam_from:.6g} -> "
             f"{lam_to:.6g}): relative residual {residual:.3e} after {iterations} Newton iterations "
@@ -116,6 +119,7 @@ class Options:
     fast: int = 4  # converged in at most this many iterations: the next increment grows
     max_increments: int = 400  # Newton attempts (converged or not) in the whole run
     schedule: tuple | None = None  # fixed: per stage, increasing fractions s in (0, 1], ending at 1
+    refine: bool = False  # a fixed schedule's failed increment is halved (down to min_increment) instead of failing
     backend: str | None = None  # 'pardiso' | 'scipy' | None (plasticity.linear.default_backend)
 
 
@@ -238,6 +242,7 @@ class _Converged:
     mode: np.ndarray
     C: np.ndarray
     residuals: list = field(default_factory=list)
+    refactorised: bool = False  # the last correction used a tangent factorised in this increment (in `work`)
 
 
 class _Failed(Exception):
@@ -285,7 +290,7 @@ class _Problem:
             if not np.isfinite(rel):
                 raise _Failed(residuals, "residual not finite")
             if rel <= opts.tol:
-                return _Converged(u, sigma, deps, mode, C, residuals)
+                return _Converged(u, sigma, deps, mode, C, residuals, lu is work)
             if rel > 1e6 * residuals[0] and it > 1:
                 raise _Failed(residuals, "residual grew a million-fold")
             if it == opts.max_iterations:
@@ -299,7 +304,8 @@ class _Problem:
 
 class _Steps:
     """Where increments end inside a stage (fractions s of it): a fixed schedule, or adaptive
-    (the step, a lambda difference, is carried from stage to stage)."""
+    (the step, a lambda difference, is carried from stage to stage). A fixed schedule with
+    ``refine`` halves a failed increment (the ends still to reach are kept in ``pending``)."""
 
     def __init__(self, opts: Options, lam_end: float):
         self.opts, self.lam_end = opts, lam_end
@@ -307,17 +313,17 @@ class _Steps:
 
     def stage(self, i: int, lam_a: float, lam_b: float):
         self.lam_a, self.lam_b = lam_a, lam_b
-        self.fixed = None
+        self.pending = None
         if self.opts.schedule is not None:
             fixed = [float(x) for x in np.atleast_1d(self.opts.schedule[i])]
             if not fixed or fixed[-1] != 1.0 or fixed[0] <= 0 or np.any(np.diff(fixed) <= 0):
                 raise ValueError(f"schedule of stage {i + 1} must increase to exactly 1, found {fixed}")
-            self.fixed = fixed
+            self.pending = fixed
         self.used = []
 
     def next(self, s: float) -> float:
-        if self.fixed is not None:
-            return self.fixed[len(self.used)]
+        if self.pending is not None:
+            return self.pending[0]
         s_new = min(1.0, s + self.step / (self.lam_b - self.lam_a))
         return 1.0 if 1.0 - s_new < 1e-9 else s_new
 
@@ -326,16 +332,22 @@ class _Steps:
 
     def converged(self, s: float, iterations: int) -> None:
         self.used.append(s)
-        if self.fixed is None and iterations <= self.opts.fast:
+        if self.pending is not None:
+            self.pending.pop(0)
+        elif iterations <= self.opts.fast:
             self.step = min(self.step * self.opts.growth, self.opts.max_increment * self.lam_end)
 
     def failed(self, dlam: float) -> str | None:
         """Cut the step back; the reason to give up, if any."""
-        if self.fixed is not None:
+        if self.pending is not None and not self.opts.refine:
             return "fixed schedule"
-        self.step = 0.5 * dlam
-        if self.step < self.opts.min_increment * self.lam_end:
+        if 0.5 * dlam < self.opts.min_increment * self.lam_end:
             return f"increment cut below {self.opts.min_increment:g} of the final lambda"
+        if self.pending is not None:
+            s_prev = self.used[-1] if self.used else 0.0
+            self.pending.insert(0, 0.5 * (s_prev + self.pending[0]))
+        else:
+            self.step = 0.5 * dlam
         return None
 
 
@@ -413,7 +425,11 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
                 n_plastic = int(np.count_nonzero(mode))
                 counters.apex_points += int(np.count_nonzero(mode == mc.APEX))
                 logs.append(IncrementLog(number, i + 1, lam, lam - state.lam, res.residuals, True, n_plastic))
-                if not (conv_elastic and n_plastic == 0):
+                if der is None and not (conv_elastic and n_plastic == 0):
+                    if res.refactorised:  # no sensitivities: the last Newton matrix starts the next increment
+                        conv, work = work, conv
+                        conv_elastic = False
+                elif not (conv_elastic and n_plastic == 0):
                     try:  # the tangent at the converged state: for the sensitivities and the next increment
                         conv.factorise(problem.tangent(res.C, res.mode))
                     except SingularMatrix as exc:
@@ -435,6 +451,9 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
             out["yielded"].append(yielded.reshape(ops.ne, ops.nq).copy())
             if der is not None:
                 out["du"].append(state.du.copy())
+    except NonConvergence as exc:
+        exc.counters = counters  # what the failed run spent
+        raise
     finally:
         conv.release()
         work.release()
