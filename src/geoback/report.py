@@ -61,6 +61,9 @@ def summary(res, exploration=None) -> dict:
             out["parameters"][n]["dof"] = rel.parameter_dof[i]
         out["ellipse_dof"] = rel.ellipse_dof
         out["ellipse_limit_95"] = rel.ellipse_limit(0.95)
+    zone = getattr(exploration, "plastic_zone", None)
+    if zone is not None:
+        out["plastic_zone"] = zone.as_dict()
     if exploration is not None:  # the work of the field file and figures, apart from the identification's
         out["exploration"] = {k: exploration.counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}
         out["timings_s"]["exploration"] = round(exploration.seconds, 4)
@@ -73,8 +76,9 @@ def _cv(value: float, std: float) -> str:
     return f" ({100 * std / abs(value):.0f} %)" if std / abs(value) >= 0.01 else f" ({100 * std / abs(value):.2g} %)"
 
 
-def report_text(res) -> str:
-    """A one-page report in the spirit of lmfit's fit_report, warnings first."""
+def report_text(res, exploration=None) -> str:
+    """A one-page report in the spirit of lmfit's fit_report, warnings first; the plastic zone at the
+    estimate when the exploration holds it."""
     f, rel, params = res.fit, res.reliability, res.parameters
     lines = [f"# geoback fit report: {res.name}", ""]
     if res.caveats:
@@ -118,6 +122,9 @@ def report_text(res) -> str:
     lines += ["", "Most informative readings (leverage = diag Q): " +
               ", ".join(f"{reading_label(res.data.labels[i], several_stages(res.data.labels))} "
                         f"({rel.leverage[i]:.2f})" for i in top)]
+    zone = getattr(exploration, "plastic_zone", None)
+    if zone is not None:
+        lines += zone.lines()
     return "\n".join(lines) + "\n"
 
 
@@ -209,9 +216,13 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
         from .lining import write_lining
 
         write_lining(exploration.lining, out, vtu=exploration.field is not None)
+    if exploration is not None and getattr(exploration, "plastic_zone", None) is not None:
+        from .plastic_zone import write_plastic_zone
+
+        write_plastic_zone(exploration.plastic_zone, out)
     if plots:
         from .plots import plot_run
 
         plot_run(res, exploration, out)
-    write_atomic(out / "report.md", report_text(res))
+    write_atomic(out / "report.md", report_text(res, exploration))
     write_json(out / "summary.json", summary(res, exploration))
