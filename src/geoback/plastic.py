@@ -54,6 +54,7 @@ INCREMENTS = 10  # equal load increments per unit of release
 MIN_STAGE = 2  # increments of a stage at least
 ANTICIPATE = 3  # readings-only runs after a sensitivity request that compute the sensitivities asked last
 DEG = np.pi / 180
+UNMODELLED = ("n", "m")  # extensions not available with yielding ground (cross-anisotropic elasticity)
 
 
 @dataclass
@@ -115,6 +116,8 @@ class PlasticSimulation(Simulation):
     def canonical(self, name: str) -> str | None:
         if self.plan.knows(name):
             return name
+        if name.partition("[")[0] in UNMODELLED:
+            return None
         return self.strength.canonical(name) or self.ground.canonical(name)
 
     def null_value(self, name: str, values: Mapping) -> float | None:
@@ -151,7 +154,7 @@ class PlasticSimulation(Simulation):
         own = {k for k in values if self.plan.knows(k) or self.strength.knows(k)}
         ground = {k: v for k, v in values.items() if k not in own}
         pts = self.ground.fields(ground, self._point_depth, self._point_layer)
-        if np.any(pts.n != 1) or np.any(pts.m != 1):
+        if np.any(pts.n != 1) or np.any(pts.m != 1):  # (canonical() does not know n, m)
             raise GeobackError("cross-anisotropic stiffness (n, m) is not modelled with mohr-coulomb ground")
         wall = self.ground.fields(ground)
         gamma = self.loaded.case.ground.unit_weight
