@@ -381,6 +381,104 @@ class Construction(Strict):
     stages: list[Stage] = Field(min_length=1, description="construction stages in order")
 
 
+class _Forecast(Strict):
+    name: str = Field(pattern=NAME, description="unique forecast name (files and figures use it)")
+    stage: Optional[StageName] = Field(None, description="construction stage the forecast is for (default: the last)")
+    alert: Optional[Positive] = Field(
+        None, description="alert level of the forecast quantity's magnitude, in its unit (m, kN/m, kNm/m): the "
+                          "probability that it is exceeded is reported")
+
+
+class PointsForecast(_Forecast):
+    """Displacement components at listed points (a building, a utility)."""
+
+    kind: Literal["points"]
+    points: list[Point] = Field(min_length=1, description="[x, y] of each point [m]")
+    components: list[Literal["ux", "uy"]] = Field(["uy"], min_length=1)
+
+
+class LineForecast(_Forecast):
+    """A displacement component at evenly spaced points of a straight line (a settlement trough)."""
+
+    kind: Literal["line"]
+    start: Point = Field(description="first point [x, y] [m]")
+    end: Point = Field(description="last point [x, y] [m]")
+    points: Annotated[int, BeforeValidator(_whole), Field(ge=2, le=2000)] = Field(
+        41, description="number of evenly spaced points from start to end")
+    component: Literal["ux", "uy"] = Field("uy", description="displacement component (uy: up positive)")
+
+
+class ChordForecast(_Forecast):
+    """Change of length of a chord between two points (convergence; shortening negative)."""
+
+    kind: Literal["convergence"]
+    points: tuple[Point, Point]
+
+
+class InstrumentForecast(_Forecast):
+    """What an instrument of the case will read at `stage` (its readings convention; integration
+    constants of a future survey not included)."""
+
+    kind: Literal["instrument"]
+    instrument: str = Field(pattern=NAME, description="name of an instrument of the case")
+
+
+class LiningForecast(_Forecast):
+    """Section forces around the lining (thrust N [kN/m], bending moment M [kNm/m], shear V [kN/m])."""
+
+    kind: Literal["lining"]
+    quantities: list[Literal["N", "M", "V"]] = Field(["N", "M"], min_length=1)
+
+
+Forecast = Annotated[Union[PointsForecast, LineForecast, ChordForecast, InstrumentForecast, LiningForecast],
+                     Field(discriminator="kind")]
+
+
+class _Candidate(Strict):
+    """An instrument that could be installed: defined as in `instruments` (without readings), read at
+    `read_at`; `vary` makes one candidate per value of one of its fields (e.g. {x: [3, 6, 9]})."""
+
+    read_at: Optional[StageName] = Field(None, description="stage the candidate would be read at (default: the "
+                                                           "last stage with readings)")
+    vary: Optional[dict[str, list[Any]]] = Field(
+        None, description="one field and its values, one candidate per value (e.g. {x: [3, 6, 9, 12]})")
+
+
+class PointsCandidate(PointsInstrument, _Candidate):
+    pass
+
+
+class InclinometerCandidate(Inclinometer, _Candidate):
+    pass
+
+
+class SlidingMicrometerCandidate(SlidingMicrometer, _Candidate):
+    pass
+
+
+class DeflectometerCandidate(Deflectometer, _Candidate):
+    pass
+
+
+class ConvergenceCandidate(Convergence, _Candidate):
+    pass
+
+
+Candidate = Annotated[Union[PointsCandidate, InclinometerCandidate, SlidingMicrometerCandidate,
+                            DeflectometerCandidate, ConvergenceCandidate], Field(discriminator="kind")]
+
+
+class Design(Strict):
+    """`geoback design`: which candidate instrument would narrow the forecasts (or C_p) most."""
+
+    objective: Optional[Literal["forecasts", "parameters"]] = Field(
+        None, description="'forecasts': the variance of the target forecasts; 'parameters': ln det C_p (default: "
+                          "forecasts if the case has any)")
+    forecasts: Optional[list[Annotated[str, Field(pattern=NAME)]]] = Field(
+        None, description="names of the forecasts to narrow (default: all)")
+    candidates: list[Candidate] = Field(min_length=1, description="candidate instruments")
+
+
 class Output(Strict):
     dir: Optional[str] = Field(None, description="results directory (default results/<name>)")
     vtu: Annotated[bool, BeforeValidator(_flag)] = True
@@ -400,4 +498,8 @@ class Case(Strict):
                                           "(estimated with the parameters); the others' sigma is taken as exact")
     parameters: list[Parameter] = Field(default_factory=list)
     fit: FitSettings = FitSettings()
+    forecasts: list[Forecast] = Field(
+        default_factory=list, description="quantities to forecast at the estimate with their 95 % band (points, "
+                                          "lines, chords, an instrument's next readings, the lining's forces)")
+    design: Optional[Design] = Field(None, description="candidate instruments for `geoback design`")
     output: Output = Output()

@@ -283,6 +283,35 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
 
 @app.command()
 @friendly
+def design(case: Path = typer.Argument(..., help="case file (YAML) with a design section"),
+           out: Optional[str] = typer.Option(None, help=OUT_HELP),
+           plots: bool = typer.Option(True, help="write the figure (design.png, design.svg)"),
+           allow_large: bool = _allow_large()):
+    """Rank candidate instruments by how much they would narrow the forecasts (or the parameters)."""
+    out = _check_out(out)
+    loaded = _load(case, allow_large)
+    if loaded.case.design is None:
+        raise loaded.error(("design",), "expected a design section with candidate instruments (see `geoback "
+                                        "init`), found none")
+    folder = _out_dir(loaded, out)
+    from .design import design as rank
+    from .design_report import design_text, write_design
+    from .identification import identify, prepare
+
+    analysis = prepare(loaded)
+    _say("identifying the parameters at which the candidates are compared")
+    res = identify(analysis)
+    if res.fit.status != "converged" or not res.fit.moved:
+        raise GeobackError(f"the identification did not converge ({res.status}): candidates are compared at the "
+                           "estimate; run `geoback run` and fix the case first")
+    d = rank(analysis, res, progress=_say)
+    write_design(d, folder, loaded.case.name, plots=plots)
+    typer.echo(design_text(d, loaded.case.name))
+    typer.echo(f"best: {d.best} ({100 * d.reduction[d.ranking[0]]:.0f} % narrower) -> {folder}/design.md")
+
+
+@app.command()
+@friendly
 def covariance(case: Optional[Path] = typer.Argument(None, help="case file: print an instrument's C_x"),
                name: Optional[str] = typer.Option(None, "--name", help="instrument name in the case"),
                instrument: Optional[str] = typer.Option(None, help="inclinometer, sliding-micrometer (extensometer) or deflectometer"),

@@ -104,9 +104,10 @@ class FEModel:
         # component matrices per element, kept only at the entries used above
         self._values = np.empty((4, len(self._slots)))
         pos = 0
+        sources = self._pair_sources(iu, ju)
         for start in range(0, self.ne, chunk):
             sl = slice(start, min(start + chunk, self.ne))
-            local = self._local_components(sl)[:, :, iu, ju]  # (4, n, pairs)
+            local = self._local_components(sl, sources)  # (4, n, pairs)
             k = keep[sl]
             n_here = int(k.sum())
             self._values[:, pos:pos + n_here] = local[:, k]
@@ -135,16 +136,51 @@ class FEModel:
         w = np.abs(det) * self._W
         return exx, eyy, gxy, w
 
-    def _local_components(self, sl: slice) -> np.ndarray:
-        exx, eyy, gxy, w = self._strain_operators(sl)
-        w = w[:, None, :]
-        out = np.empty((4,) + exx.shape[:2] + (exx.shape[1],))
-        out[0] = (exx * w) @ exx.transpose(0, 2, 1)  # batched matmul: ~8x faster than einsum here
-        out[1] = (eyy * w) @ eyy.transpose(0, 2, 1)
-        k12 = (exx * w) @ eyy.transpose(0, 2, 1)
-        out[2] = k12 + k12.transpose(0, 2, 1)
-        out[3] = (gxy * w) @ gxy.transpose(0, 2, 1)
+    def _nodal_products(self, sl: slice) -> np.ndarray:
+        """M_xx, M_yy, M_xy, M_yx per element (n, 4 * nb * nb, flattened), M_xy[a, b] = int N_a,x N_b,y."""
+        coords = self.nodes[self.tri[sl]]
+        inv, det = _geometry(coords, self._dN)
+        dNdx = np.einsum("nrq,eqrx->enxq", self._dN, inv)  # (n, nb, 2, nq)
+        w = (np.abs(det) * self._W)[:, None, :]
+        gx, gy = dNdx[:, :, 0], dNdx[:, :, 1]
+        Mxx = (gx * w) @ gx.transpose(0, 2, 1)
+        Myy = (gy * w) @ gy.transpose(0, 2, 1)
+        Mxy = (gx * w) @ gy.transpose(0, 2, 1)
+        n = len(gx)
+        out = np.empty((n, 4) + Mxx.shape[1:])
+        out[:, 0], out[:, 1], out[:, 2], out[:, 3] = Mxx, Myy, Mxy, Mxy.transpose(0, 2, 1)
+        return out.reshape(n, -1)
+
+    def _pair_sources(self, iu: np.ndarray, ju: np.ndarray) -> np.ndarray:
+        """For each component (K11, K22, K12 + K12^t, K33) and local dof pair (i, j), the column of
+        _nodal_products it equals, or the last (a zero) where the component has no entry. With dof
+        2a = a_x, 2a + 1 = a_y: K11[a_x, b_x] = M_xx; K22[a_y, b_y] = M_yy; (K12 + K12^t)[a_x, b_y] =
+        M_xy[a, b] and [a_y, b_x] = M_yx[a, b]; K33[a_x, b_x] = M_yy, [a_y, b_y] = M_xx,
+        [a_x, b_y] = M_yx, [a_y, b_x] = M_xy (eqn 36's strain operators written node by node)."""
+        nb = self.tri.shape[1]
+        a, ca, b, cb = iu // 2, iu % 2, ju // 2, ju % 2
+        XX, YY, XY, YX = 0, 1, 2, 3
+        zero = 4 * nb * nb
+        table = {0: {(0, 0): XX}, 1: {(1, 1): YY}, 2: {(0, 1): XY, (1, 0): YX},
+                 3: {(0, 0): YY, (1, 1): XX, (0, 1): YX, (1, 0): XY}}
+        out = np.full((4, len(iu)), zero, np.int64)
+        for c, where in table.items():
+            for (u, v), src in where.items():
+                sel = (ca == u) & (cb == v)
+                out[c, sel] = src * nb * nb + a[sel] * nb + b[sel]
         return out
+
+    def _local_components(self, sl: slice, sources: np.ndarray | None = None) -> np.ndarray:
+        """The four component matrices (4, n, 2nb, 2nb), or with `sources` only their entries at the
+        pairs `sources` gives (4, n, pairs)."""
+        nb = self.tri.shape[1]
+        if sources is None:
+            iu, ju = np.meshgrid(np.arange(2 * nb), np.arange(2 * nb), indexing="ij")
+            full = self._local_components(sl, self._pair_sources(iu.ravel(), ju.ravel()))
+            return full.reshape(4, -1, 2 * nb, 2 * nb)
+        M = self._nodal_products(sl)
+        M = np.concatenate([M, np.zeros((len(M), 1))], axis=1)
+        return np.stack([M[:, sources[c]] for c in range(4)])
 
     def matrix(self, coeffs: np.ndarray) -> sp.csr_matrix:
         """Upper triangle of sum_e sum_c coeffs[e, c] K_c,e on the free dofs (coeffs: (ne, 4))."""

@@ -42,7 +42,8 @@ def summary(res, exploration=None) -> dict:
                            "std": rel.std[i], "ci95": [lo[i], hi[i]],
                            "ci95_method": "profile likelihood" if n in res.profiled else "linearised",
                            "ci95_open": list(res.profiled[n][2:]) if n in res.profiled else [False, False],
-                           "at_bound": bool(f.at_bound[i])}
+                           "at_bound": bool(f.at_bound[i]),
+                           **(res.prior_posterior.as_dict(i) if res.prior_posterior is not None else {})}
                        for i, n in enumerate(params.names)},
         "warnings": [c.as_dict() for c in res.caveats],
         "mesh_error": ({**res.mesh_error.as_dict(), "included_in_C_x": res.mesh_error_included}
@@ -64,6 +65,10 @@ def summary(res, exploration=None) -> dict:
     zone = getattr(exploration, "plastic_zone", None)
     if zone is not None:
         out["plastic_zone"] = zone.as_dict()
+    if res.forecasts is not None:
+        from .forecast_report import as_dict
+
+        out["forecasts"] = as_dict(res.forecasts)
     if exploration is not None:  # the work of the field file and figures, apart from the identification's
         out["exploration"] = {k: exploration.counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}
         out["timings_s"]["exploration"] = round(exploration.seconds, 4)
@@ -100,6 +105,7 @@ def report_text(res, exploration=None) -> str:
                 f"≥ its bound {hi[i]:.6g}" if hi_open else f"{hi[i]:.6g}")
         lines.append(f"| {n} | {params.units[i]} | {params.initial[i]:.6g} | {f.p[i]:.6g}{bound} | "
                      f"{rel.std[i]:.3g}{_cv(f.p[i], rel.std[i])} | [{ends[0]}, {ends[1]}]{how} |")
+    lines += prior_posterior_lines(res)
     if rel.parameter_dof is not None:
         lines += ["", "The error scales are estimated: the intervals are Student t on "
                   + ", ".join(f"{n} {d:.3g}" for n, d in zip(params.names, rel.parameter_dof))
@@ -125,7 +131,29 @@ def report_text(res, exploration=None) -> str:
     zone = getattr(exploration, "plastic_zone", None)
     if zone is not None:
         lines += zone.lines()
-    return "\n".join(lines) + "\n"
+    text = "\n".join(lines) + "\n"
+    if res.forecasts is not None:
+        from .forecast_report import report_section
+
+        text += report_section(res.forecasts)
+    return text
+
+
+def prior_posterior_lines(res) -> list[str]:
+    """Prior -> posterior std of each parameter and its identifiability (identifiability.py)."""
+    pp = res.prior_posterior
+    if pp is None:
+        return []
+    out = ["", "What the readings tell (prior → posterior std; identifiability 0: nothing beyond the prior, "
+               "1: fixed by the readings):", "",
+           "| parameter | prior std | prior | posterior std | reduction | identifiability |", "|---|---|---|---|---|---|"]
+    for i, n in enumerate(pp.names):
+        out.append(f"| {n} | {pp.prior_std[i]:.3g} | {pp.prior_source[i]} | {pp.posterior_std[i]:.3g} | "
+                   f"{100 * pp.reduction[i]:.0f} % | {pp.identifiability[i]:.2f} |")
+    if "usual range" in pp.prior_source:
+        out += ["", "(usual range: no prior in the case, so an uninformed one spanning the usual range for ground "
+                    "as its 95 % interval, in ln p for positive quantities.)"]
+    return out
 
 
 def chi2_line(rel) -> str:
@@ -188,10 +216,14 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
     names = params.names
     out = Path(out)
     lo, hi = res.intervals95()
+    pp = res.prior_posterior
     write_csv(out / "parameters.csv",
-              ["name", "unit", "initial", "estimate", "std", "ci95_low", "ci95_high", "ci95_method", "at_bound"],
+              ["name", "unit", "initial", "estimate", "std", "ci95_low", "ci95_high", "ci95_method", "at_bound",
+               "prior_std", "prior_source", "posterior_std", "identifiability"],
               [[n, params.units[i], params.initial[i], f.p[i], rel.std[i], lo[i], hi[i],
                 "profile likelihood" if n in res.profiled else "linearised", bool(f.at_bound[i])]
+               + ([pp.prior_std[i], pp.prior_source[i], pp.posterior_std[i], pp.identifiability[i]] if pp is not None
+                  else ["", "", "", ""])
                for i, n in enumerate(names)])
     write_matrix_csv(out / "covariance.csv", names, rel.covariance)
     write_matrix_csv(out / "correlation.csv", names, rel.correlation)
@@ -220,6 +252,10 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
         from .plastic_zone import write_plastic_zone
 
         write_plastic_zone(exploration.plastic_zone, out)
+    if res.forecasts is not None:
+        from .forecast_report import HEADER, forecast_rows
+
+        write_csv(out / "forecast.csv", HEADER, forecast_rows(res.forecasts))
     if plots:
         from .plots import plot_run
 

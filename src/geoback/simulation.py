@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
 
-from .instruments import CONSTANT_STEMS, Survey
+from .instruments import CONSTANT_STEMS, Survey, build_survey
 
 
 @dataclass
@@ -163,6 +164,29 @@ class Simulation(ABC):
 
     def release(self) -> None:
         """Free memory held by factorisations (the simulation stays usable)."""
+
+    # ------------------------------------------------------------------ other instruments
+    SURVEY_CACHES: tuple[str, ...] = ()  # attributes holding results per survey row
+
+    @contextmanager
+    def surveying(self, blocks):
+        """The simulation reading other instruments for a while (forecast points, candidate
+        instruments): the same mesh, factorisations and remembered solutions, another survey.
+
+            with simulation.surveying(blocks) as sim:
+                q = sim.predict(values, names, sensitivities=True)
+        """
+        saved = {a: getattr(self, a) for a in ("survey",) + self.SURVEY_CACHES}
+        self.survey = build_survey(blocks, self.fe)
+        self._survey_changed(saved)
+        try:
+            yield self
+        finally:
+            for a, v in saved.items():
+                setattr(self, a, v)
+
+    def _survey_changed(self, saved: dict) -> None:
+        """Re-derive what SURVEY_CACHES hold for the new survey (`saved`: the old values)."""
 
 
 class Stopwatch:

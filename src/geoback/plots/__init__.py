@@ -103,6 +103,11 @@ def save_figures(figs: dict, out: Path, formats: tuple[str, ...] = FORMATS, dpi:
 def plot_run(res, exploration, out: Path, formats: tuple[str, ...] = FORMATS) -> list[Path]:
     """Build every figure of the run and write PNG and SVG files into `out`; return the paths."""
     figs = build_figures(res, exploration)
+    if getattr(res, "forecasts", None) is not None:
+        from .forecast import forecast_figures
+
+        with matplotlib.rc_context(RC):
+            figs.update(forecast_figures(res.forecasts))
     try:
         return save_figures(figs, out, formats)
     finally:
