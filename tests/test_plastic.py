@@ -194,3 +194,73 @@ def test_a_trial_point_without_solution_is_a_rejected_step():
     res = fit(misfit, Settings(max_iterations=30), method="gn")
     assert any(not np.isfinite(h.J) and not h.accepted for h in res.history)
     assert res.status == "converged" and res.p[0] == pytest.approx(24.0, abs=0.05)
+
+
+def test_forecasts_on_yielding_ground_are_the_model_at_the_estimate():
+    """A plastic case with forecasts (a settlement line and points at the last stage, an instrument read
+    at the first): the forecasts read through another survey (Simulation.surveying) equal the forward
+    model at the identified values at those points, their sensitivities equal central differences of it,
+    and the simulation reads its own instruments as before."""
+    from geoback.forecast import forecast
+
+    data = case_data()
+    data["parameters"] = [dict(name="E", initial="30 MPa", bounds=["1 MPa", "1 GPa"]),
+                          dict(name="c", initial=70.0, bounds=[5.0, 500.0])]
+    data["forecasts"] = [
+        dict(name="trough", kind="line", start=[0.0, 0.0], end=[20.0, 0.0], points=5, component="uy", stage="final"),
+        dict(name="P", kind="points", points=[[4.0, -10.0]], components=["ux", "uy"], stage="final"),
+        dict(name="X1-near", kind="instrument", instrument="X1", stage="near"),
+    ]
+    data["design"] = dict(forecasts=["trough"], candidates=[
+        dict(name="S2", kind="points", points=[[6.0, 0.0]], components=["uy"], sigma=0.0005,
+             vary={"points": [[[6.0, 0.0]], [[30.0, 0.0]]]})])
+    loaded = LoadedCase(case_from_data(data), None, {})
+    analysis = prepare(loaded, with_readings=False)
+    sim = analysis.simulation
+    truth = dict(analysis.values, **{"E[marl]": 40000.0, "c[marl]": 50.0})
+    x_true = sim.predict(truth).x
+    a = analysis.with_readings(x_true)
+    from geoback.identification import identify
+
+    res = identify(a, profile="none")
+    assert res.status == "converged" and res.fit.p == pytest.approx([40000.0, 50.0], rel=1e-4)
+    before = a.predict(res.fit.p, sensitivities=True)
+    fc = forecast(a, res, draws=0)
+    after = a.predict(res.fit.p, sensitivities=True)
+    np.testing.assert_array_equal(before.x, after.x)  # the simulation's own survey is back
+    np.testing.assert_array_equal(before.A, after.A)
+    assert fc.counts["forward_runs"] == 0  # the forecasts read the fit's last run
+
+    values = a.values_at(res.fit.p)
+    fresh = make_simulation(loaded, mesh=sim.mesh)
+    line = np.column_stack([np.linspace(0.0, 20.0, 5), np.zeros(5)])
+    expected_trough = fresh.stage_displacements_at(values, line, "final")[:, 1]
+    np.testing.assert_allclose(fc.value[fc.rows("trough")], expected_trough, rtol=1e-9, atol=1e-12)
+    expected_p = fresh.stage_displacements_at(values, np.array([[4.0, -10.0]]), "final")[0]
+    np.testing.assert_allclose(fc.value[fc.rows("P")], expected_p, rtol=1e-9, atol=1e-12)
+    from geoback.instruments import case_blocks
+
+    x1_near = make_simulation(loaded, mesh=sim.mesh, blocks=[b.at("near") for b in case_blocks(loaded)
+                                                             if b.name == "X1"]).predict(values).x
+    np.testing.assert_allclose(fc.value[fc.rows("X1-near")], x1_near, rtol=1e-9, atol=1e-12)
+
+    # geoback design on yielding ground: candidates read through another survey, no new run
+    from geoback.design import design
+
+    d = design(a, res)
+    assert d.counts["forward_runs"] == 0 and len(d.names) == 2
+    assert np.all(np.isfinite(d.after)) and d.best == d.names[0]  # a point near the trough beats one far out
+
+    # the band's sensitivities: exact DDM columns against central differences of the trough
+    fd = copy.copy(fresh)
+    fd.options = replace(fresh.options, schedule=fresh.solution(values).result.schedule, refine=False, tol=1e-13)
+    fd.release()
+    for j, name in enumerate(res.parameters.names):
+        h = 1e-5 * abs(values[name])
+        up, down = dict(values), dict(values)
+        up[name] += h
+        down[name] -= h
+        col = (fd.stage_displacements_at(up, line, "final")[:, 1]
+               - fd.stage_displacements_at(down, line, "final")[:, 1]) / (2 * h)
+        exact = fc.sensitivity[fc.rows("trough"), j]
+        assert np.linalg.norm(col - exact) <= 1e-5 * np.linalg.norm(exact), name

@@ -32,11 +32,11 @@ Newton iteration starts from the last run's solution of that increment when the 
 smaller there than at the previous converged state (warm start: an optimiser's next point is near
 its last); the converged solution is the same to the Newton tolerance either way.
 
-Not modelled: a lining on yielding ground (refused by the case checks), cross-anisotropic elasticity.
+Forecasts and design read other instruments through ``Simulation.surveying`` (nothing survey-
+dependent is cached, see SURVEY_CACHES). Not modelled: a lining on yielding ground (refused by the case checks), cross-anisotropic elasticity.
 """
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass
 from typing import Mapping, Sequence
@@ -276,6 +276,12 @@ class PlasticSimulation(Simulation):
         self.counters.seconds_factorising += c.seconds.get("factorise", 0.0)
         self.counters.seconds_solving += c.seconds.get("backsubstitute", 0.0)
         self.counters.seconds_assembling += c.seconds.get("assemble tangent", 0.0)
+
+    # Forecasts and `geoback design` read other instruments (Simulation.surveying): nothing here is
+    # cached per survey row - the last run holds u and du/dv on every dof of every stage, and each
+    # row's stage is read from the survey at every call - so there is nothing to swap, and the
+    # forecasts read the fit's last run without a new one.
+    SURVEY_CACHES: tuple[str, ...] = ()
 
     def _row_stage(self) -> np.ndarray:
         index = {n: k for k, n in enumerate(self.stages)}
