@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import csv
 import os
 import statistics
 import time
@@ -42,6 +41,8 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+
+from table import print_table
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE = ROOT / "cases" / "plastic-tunnel.yaml"
@@ -187,16 +188,7 @@ def main(argv: list[str] | None = None) -> dict:
         (f"target identification >= {FLOOR_RATIO:g}x less wall time", "PASS" if ratio >= FLOOR_RATIO else "FAIL"),
         (f"target one forward run < {FLOOR_FORWARD:g} s", "PASS" if f["seconds"] < FLOOR_FORWARD else "FAIL"),
     ]
-    width = max(len(k) for k, _ in rows)
-    for k, v in rows:
-        print(f"{k.ljust(width)}  {v}")
-    if args.csv:
-        args.csv.parent.mkdir(parents=True, exist_ok=True)
-        with open(args.csv, "w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh, lineterminator="\n")
-            w.writerow(["quantity", "value"])
-            w.writerows(rows)
-    return dict(rows)
+    return print_table(rows, args.csv)
 
 
 if __name__ == "__main__":
