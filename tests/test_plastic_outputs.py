@@ -14,7 +14,7 @@ from conftest import CASES
 from geoback.case import load_case
 from geoback.identification import prepare
 from geoback.run import run_case
-from geoback.scales import chi2_ppf
+from geoback.scale_estimates import chi2_ppf
 from geoback.simulate import simulate
 
 PLASTIC = CASES / "plastic-tunnel.yaml"

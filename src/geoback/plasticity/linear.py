@@ -152,33 +152,3 @@ class LU:
         self._lu = None
         self._pattern = None
 
-
-class Refined:
-    """Solves with a matrix K through the factorisation of a nearby one M (the last Newton matrix of
-    an increment, the tangent one iterate before convergence): iterative refinement
-    x <- x + M^-1 (b - K x) until |b - K x| <= REFINE_TOL |b|, which costs back-substitutions and
-    products with K instead of a factorisation of K; if REFINE_STEPS do not get there (M too far
-    from K), K is factorised after all (into a work LU of its own)."""
-
-    REFINE_TOL = 1e-13
-    REFINE_STEPS = 4
-
-    def __init__(self, near: LU, K: sp.csr_matrix, counters: Counters):
-        self.near, self.K, self.counters = near, K, counters
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        x = self.near.solve(rhs)
-        ref = np.linalg.norm(rhs, axis=0)
-        for _ in range(self.REFINE_STEPS):
-            r = rhs - self.K @ x
-            if np.all(np.linalg.norm(r, axis=0) <= self.REFINE_TOL * ref):
-                return x
-            x = x + self.near.solve(r)
-        r = rhs - self.K @ x
-        if np.all(np.linalg.norm(r, axis=0) <= self.REFINE_TOL * ref):
-            return x
-        exact = LU(self.counters, self.near.backend).factorise(self.K)
-        try:
-            return exact.solve(rhs)
-        finally:
-            exact.release()
