@@ -10,7 +10,9 @@
    whose sensitivity lies in the baseline's span cannot be identified together with it: said so.
 4. Refit the most promising; likelihood-ratio test dJ ~ chi^2(k), AIC, BIC; accept the best
    significant one (Bonferroni over the hypotheses refitted); look once more; stop when adequate
-   or nothing more is significant.
+   or nothing more is significant. Hypotheses that no score test can rank (yielding: at an elastic
+   state every sensitivity to the strength is zero; ``yielding.py``) are screened instead and
+   refitted whenever the model is not adequate, in the same Bonferroni family.
 
 Error scales (the case's ``error_scales``, scales.py). A free scale must not explain a mismatch
 away, so:
@@ -44,6 +46,8 @@ from ..estimate import Fit, Settings, fit
 from ..identification import Identification, conclude
 from ..misfit import Misfit
 from ..reliability import Reliability, chi2_sf
+from ..simulation import is_constant
+from . import yielding
 from .hypotheses import Hypothesis, candidate_hypotheses
 
 COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mimic
@@ -253,6 +257,12 @@ def score_hypotheses(misfit: Misfit, p_hat: np.ndarray, hypotheses: list[Hypothe
     return out
 
 
+def _modelled(misfit: Misfit, h: Hypothesis) -> bool:
+    """Can the misfit's simulation take the hypothesis' parameters (yielding ground has no anisotropy)?"""
+    sim = misfit.simulation
+    return all(sim.canonical(q.name) is not None for q in h.parameters if not is_constant(q.name))
+
+
 def _lr_objective(misfit: Misfit, f: Fit) -> float:
     """What a likelihood ratio compares: J, or with estimated scales the support function maximised
     over them (maximum-likelihood profile; restricted likelihoods of different models don't compare)."""
@@ -408,11 +418,12 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             rounds.append(Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, [], None, True,
                                 scales=cur_rel.error_scales, scale_threshold=scale_level))
             break
-        hyps = candidate_hypotheses(current, cur_fit.p)
+        hyps = [h for h in candidate_hypotheses(current, cur_fit.p) if _modelled(current, h)]
         say(f"scoring {len(hyps)} hypotheses")
         ranking = _best_of_groups(scored := score_hypotheses(current, cur_fit.p, hyps))
         testable = [s for s in ranking if s.collinear_with is None]
-        threshold = alpha / max(len(testable), 1)
+        unscored = yielding.screen(current, cur_fit.p)  # likelihood-ratio refits only (yielding.py)
+        threshold = alpha / max(len(testable) + len(unscored), 1)
         # adequate: the omnibus chi^2 test passes (readings of known sigma), every estimated error
         # scale is within what the case allows, and no targeted alternative is significant
         chi2_ok = cur_rel.p_value >= alpha if cur_rel.dof > 0 else True
@@ -433,6 +444,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             say(f"refitting with {s.hypothesis.title}")
             s.refit, s.reliability = _fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
             _compare(s, s.J0, 0)
+        ranking += [s for s in (yielding.refit(h, current, cur_fit, settings, method, say) for h in unscored) if s]
         significant = [s for s in ranking if s.refit is not None and s.p_lr < threshold and _settled(s.refit)]
         rnd.accepted = _choose(significant)
         if rnd.accepted is None:

@@ -101,7 +101,7 @@ def diagnosis_text(d) -> str:
                     if s.hypothesis.extra_values:
                         est += " (" + ", ".join(f"{k2} = {v:g}" for k2, v in s.hypothesis.extra_values.items()) + ")"
                 fmt = (lambda v: f"{v:.4g}" if np.isfinite(v) else "-")
-                lines.append(f"| {s.hypothesis.title} | {s.score:.4g} | {s.p_score:.2g} | {fmt(s.dJ)} | "
+                lines.append(f"| {s.hypothesis.title} | {fmt(s.score)} | {fmt(s.p_score)} | {fmt(s.dJ)} | "
                              f"{fmt(s.p_lr)} | {fmt(s.aic)} | {fmt(s.bic)} | {est} |")
         if rnd.accepted is not None:
             lines += ["", f"Accepted: **{rnd.accepted.hypothesis.title}** - {rnd.accepted.hypothesis.description}"]
