@@ -77,3 +77,35 @@ def test_identical_hypotheses_are_not_separated(gradient_vs_anisotropy):
     loaded, an, (ma, fa), _, names, blocks = gradient_vs_anisotropy
     D = discriminate(("a", ma, fa.p), ("a again", ma, fa.p), blocks, names)
     assert np.all(D.separation < 1e-9)
+
+
+def test_design_separate_ranks_candidates_between_the_leading_hypotheses(tmp_path):
+    """`geoback design --separate` on a concealed modulus gradient: the diagnosis' two leading
+    hypotheses, each candidate's power in design.md, design.csv and design.json."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from geoback.cli import app
+
+    data = yaml.safe_load((CASES / "concealed" / "stiffness-gradient.yaml").read_text())
+    for ins in data["instruments"]:
+        if "readings_file" in ins:
+            ins["readings_file"] = str((CASES / "concealed" / ins["readings_file"]).resolve())
+    data["design"] = {"objective": "parameters", "candidates": [
+        {"name": "I3", "kind": "inclinometer", "x": 9.0, "toe_depth": 30.0, "spacing": 1.5, "stations": 19,
+         "sigma": 0.0003, "vary": {"x": [4.0, 20.0]}},
+        {"name": "P", "kind": "points", "points": [[0.0, -20.0]], "components": ["ux"], "sigma": 0.0003}]}
+    path = tmp_path / "case.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    result = CliRunner().invoke(app, ["design", str(path), "--separate", "--out", str(tmp_path / "out"),
+                                      "--no-plots"])
+    assert result.exit_code == 0, result.output
+    out = json.loads((tmp_path / "out" / "design.json").read_text())["separation"]
+    assert "increasing with depth" in out["a"] + out["b"]
+    power = {c["name"]: c["power"] for c in out["candidates"]}
+    assert power["I3-x4"] > 0.9 > power["I3-x20"]  # near the tunnel the two differ; far out they do not
+    assert power["P"] == pytest.approx(0.05)  # a horizontal reading on the symmetry axis tells nothing
+    assert "best to tell" in result.output
+    assert "separation_power" in (tmp_path / "out" / "design.csv").read_text().splitlines()[0]
+    assert "## Telling" in (tmp_path / "out" / "design.md").read_text()

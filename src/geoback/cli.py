@@ -286,6 +286,9 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
 def design(case: Path = typer.Argument(..., help="case file (YAML) with a design section"),
            out: Optional[str] = typer.Option(None, help=OUT_HELP),
            plots: bool = typer.Option(True, help="write the figure (design.png, design.svg)"),
+           separate: bool = typer.Option(False, "--separate", help="also rank the candidates by their power to "
+                                         "tell apart the two hypotheses `geoback diagnose` finds leading "
+                                         "(runs the diagnosis first)"),
            allow_large: bool = _allow_large()):
     """Rank candidate instruments by how much they would narrow the forecasts (or the parameters)."""
     out = _check_out(out)
@@ -305,9 +308,20 @@ def design(case: Path = typer.Argument(..., help="case file (YAML) with a design
         raise GeobackError(f"the identification did not converge ({res.status}): candidates are compared at the "
                            "estimate; run `geoback run` and fix the case first")
     d = rank(analysis, res, progress=_say)
+    if separate:
+        from .design import separate as discriminate
+
+        _say("diagnosing: which hypotheses explain the readings best")
+        d = discriminate(analysis, d, progress=_say)
+        if d.discrimination is None:
+            _say("diagnose refitted no hypothesis: nothing to tell apart")
     write_design(d, folder, loaded.case.name, plots=plots)
     typer.echo(design_text(d, loaded.case.name))
     typer.echo(f"best: {d.best} ({100 * d.reduction[d.ranking[0]]:.0f} % narrower) -> {folder}/design.md")
+    D = d.discrimination
+    if D is not None and D.separation.max() > 1e-9:
+        k = int(D.separation.argmax())
+        typer.echo(f"best to tell {D.a} from {D.b}: {D.names[k]} (power {D.power[k]:.2f})")
 
 
 @app.command()

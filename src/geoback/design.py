@@ -48,6 +48,7 @@ class DesignResult:
     unit: str  # of the target forecasts
     seconds: float
     counts: dict
+    discrimination: object = None  # discrimination.Discrimination of the two leading hypotheses (--separate)
 
     @property
     def reduction(self) -> np.ndarray:
@@ -83,6 +84,29 @@ def candidate_blocks(loaded, default_stage: str) -> list[tuple[int, object, obje
     return out
 
 
+def case_candidates(analysis) -> list[tuple[int, object, object]]:
+    """The case's candidates (`candidate_blocks`), read by default at the last stage with readings."""
+    sim = analysis.simulation
+    read_stages = [lab.stage for lab in sim.survey.labels]
+    return candidate_blocks(analysis.loaded, read_stages[-1] if read_stages else sim.stages[-1])
+
+
+def separate(analysis, d: DesignResult, progress=None) -> DesignResult:
+    """`d` with the candidates' power to tell apart the two hypotheses `geoback diagnose` finds
+    leading (discrimination.py); unchanged (no discrimination) when diagnose refits none."""
+    from dataclasses import replace
+
+    from .diagnosis import diagnose
+    from .discrimination import discriminate, leading_pair
+
+    diagnosis = diagnose(analysis, progress=progress)
+    pair = leading_pair(diagnosis, analysis)
+    if pair is None:
+        return d
+    cands = case_candidates(analysis)
+    return replace(d, discrimination=discriminate(pair[0], pair[1], [b for _, _, b in cands], d.names))
+
+
 def design(analysis, result, progress=None) -> DesignResult:
     """Rank the case's candidate instruments at the estimate of `result` (module docstring)."""
     from .forecast import forecast
@@ -116,9 +140,7 @@ def design(analysis, result, progress=None) -> DesignResult:
         return float(logdet), np.zeros(0)
 
     before, target_before = measure(Cp)
-    read_stages = [lab.stage for lab in sim.survey.labels]
-    default_stage = read_stages[-1] if read_stages else sim.stages[-1]
-    cands = candidate_blocks(loaded, default_stage)
+    cands = case_candidates(analysis)
     after, t_after, s_after = [], [], []
     for k, (fam, c, block) in enumerate(cands):
         with sim.surveying([block]) as view:

@@ -118,3 +118,18 @@ def discriminate(a, b, blocks, names: list[str], level: float = 0.05) -> Discrim
     fa, fb = _fitted(ma, pa, blocks), _fitted(mb, pb, blocks)
     Ls = [np.linalg.cholesky(block.covariance) for block in blocks]
     return Discrimination(wa, wb, list(names), _growth(fa, fb, mb, Ls), _growth(fb, fa, ma, Ls), level)
+
+
+def leading_pair(diagnosis, analysis):
+    """The two hypotheses that explain the readings best in `diagnosis`'s first round, each as
+    (words, misfit, estimate): the two refitted hypotheses of lowest AIC, or the one refitted
+    and the case's model without it; None when no hypothesis was refitted."""
+    first = diagnosis.rounds[0]
+    fitted = sorted((s for s in first.ranking if s.refit is not None and s.misfit is not None
+                     and np.isfinite(s.aic)), key=lambda s: s.aic)
+    pair = [(s.hypothesis.title, s.misfit, s.refit.p) for s in fitted[:2]]
+    if not pair:
+        return None
+    if len(pair) == 1:
+        pair.append(("the case's model as it is", analysis.misfit, diagnosis.baseline.fit.p))
+    return tuple(pair)
