@@ -21,18 +21,24 @@ from geoback.misfit import Data, Misfit
 from geoback.simulation import make_simulation
 
 
-@pytest.fixture(scope="module")
-def gradient_vs_anisotropy(tmp_path_factory):
-    """Readings of a concealed modulus gradient; a = the gradient, b = cross-anisotropy, both fitted."""
+def gradient_case(candidates: list[dict]) -> dict:
+    """The concealed modulus-gradient case (its readings files by absolute path) with these candidates."""
     data = yaml.safe_load((CASES / "concealed" / "stiffness-gradient.yaml").read_text())
     for ins in data["instruments"]:
         if "readings_file" in ins:
             ins["readings_file"] = str((CASES / "concealed" / ins["readings_file"]).resolve())
-    data["design"] = {"objective": "parameters", "candidates": [
+    data["design"] = {"objective": "parameters", "candidates": candidates}
+    return data
+
+
+@pytest.fixture(scope="module")
+def gradient_vs_anisotropy(tmp_path_factory):
+    """Readings of a concealed modulus gradient; a = the gradient, b = cross-anisotropy, both fitted."""
+    data = gradient_case([
         {"name": "I3", "kind": "inclinometer", "x": 9.0, "toe_depth": 30.0, "spacing": 1.5, "stations": 19,
          "sigma": 0.0003, "vary": {"x": [4.0, 6.0, 14.0, 20.0]}},
         {"name": "P", "kind": "points", "points": [[0.0, 0.0]], "components": ["ux"], "sigma": 0.0003,
-         "vary": {"points": [[[4.0, -8.0]], [[4.0, -12.0]], [[8.0, -16.0]], [[0.0, -20.0]]]}}]}
+         "vary": {"points": [[[4.0, -8.0]], [[4.0, -12.0]], [[8.0, -16.0]], [[0.0, -20.0]]]}}])
     loaded = LoadedCase(case_from_data(data), tmp_path_factory.mktemp("disc") / "case.yaml", {})
     an = prepare(loaded)
     f0 = fit(an.misfit, an.settings)
@@ -88,14 +94,10 @@ def test_design_separate_ranks_candidates_between_the_leading_hypotheses(tmp_pat
 
     from geoback.cli import app
 
-    data = yaml.safe_load((CASES / "concealed" / "stiffness-gradient.yaml").read_text())
-    for ins in data["instruments"]:
-        if "readings_file" in ins:
-            ins["readings_file"] = str((CASES / "concealed" / ins["readings_file"]).resolve())
-    data["design"] = {"objective": "parameters", "candidates": [
+    data = gradient_case([
         {"name": "I3", "kind": "inclinometer", "x": 9.0, "toe_depth": 30.0, "spacing": 1.5, "stations": 19,
          "sigma": 0.0003, "vary": {"x": [4.0, 20.0]}},
-        {"name": "P", "kind": "points", "points": [[0.0, -20.0]], "components": ["ux"], "sigma": 0.0003}]}
+        {"name": "P", "kind": "points", "points": [[0.0, -20.0]], "components": ["ux"], "sigma": 0.0003}])
     path = tmp_path / "case.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     result = CliRunner().invoke(app, ["design", str(path), "--separate", "--out", str(tmp_path / "out"),
