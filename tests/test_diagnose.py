@@ -21,7 +21,10 @@ EXPECTED = {
     "K0-gradient": ("K0-gradient", "K0grad", -0.06),
     "toe-moved": ("integration-constant", "B[I1]", 0.004),
     "stress-release": ("stress-release", "beta", 0.7),
+    "bias-shift": ("bias-shift", "bias[I2]", 4e-4),
+    "depth-offset": ("depth-offset", "zoff[I1]", 0.5),
 }
+INSTRUMENT = {"toe-moved", "bias-shift", "depth-offset"}  # concealed instrument errors, not ground physics
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED))
@@ -36,6 +39,26 @@ def test_concealed_effect_is_named_estimated_and_fixes_the_fit(name):
     assert lo[i] <= truth <= hi[i], (param, d.final_fit.p[i], rel.std[i])
     assert d.adequate_after
     assert rel.reduced_chi2 < d.baseline_reliability.reduced_chi2
+    cause = "instrument" if name in INSTRUMENT else "ground"
+    assert [s.hypothesis.cause for s in d.accepted] == [cause]
+    assert d.causes[cause] and not d.causes["ground" if cause == "instrument" else "instrument"]
+
+
+def test_bias_shift_is_named_as_instrument_error_in_words_and_json(tmp_path):
+    from geoback.diagnosis import write_diagnosis
+    from geoback.diagnosis.report import verdict
+
+    d = diagnose(load_case(CONCEALED / "bias-shift.yaml"))
+    text = verdict(d)
+    assert text.startswith("The mismatch is instrument error, not ground physics.")
+    assert "bias shift" in text
+    write_diagnosis(d, tmp_path, plots=False)
+    data = json.loads((tmp_path / "diagnosis.json").read_text())
+    assert data["cause"] == "instrument error"
+    assert data["instrument_error"] == ["bias-shift[I2]"] and data["ground_physics"] == []
+    assert data["missing"][0]["cause"] == "instrument error"
+    est = data["missing"][0]["estimates"]["bias[I2]"]
+    assert est["from"] == "final joint fit" and est["ci95"][0] <= 4e-4 <= est["ci95"][1]
 
 
 @pytest.mark.parametrize("name", ["null-1", "null-2", "null-3"])
@@ -54,7 +77,8 @@ def test_cli_writes_diagnosis_files(tmp_path):
     out = subprocess.run([sys.executable, "-m", "geoback.cli", "diagnose", str(CONCEALED / "null-1.yaml"),
                           "--out", str(tmp_path), "-q"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    assert "Nothing is missing" in out.stdout
+    assert "No effect the library can detect is missing" in out.stdout  # not "nothing is missing"
+    assert "would have caught, with 80 % probability" in out.stdout  # and what size it would have caught
     data = json.loads((tmp_path / "diagnosis.json").read_text())
     assert data["adequate_before"] is True and data["missing"] == []
     assert (tmp_path / "diagnosis.md").read_text().startswith("# geoback diagnosis")
