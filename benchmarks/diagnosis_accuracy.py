@@ -12,7 +12,8 @@ effect of random kind and magnitude that the case's (baseline) model lacks:
   K0-gradient           K0grad = +-k, k log-uniform in (0.01, 0.08) per m
   integration-constant  the toe of inclinometer I1 moved: B[I1] = +-b, b log-uniform in (1, 8) mm
   stress-release        beta = 1 - d, d log-uniform in (0.05, 0.4), with a prior on E in the case
-                        (mean = true E, std 5 %: without it beta is not separable from E)
+                        (std 5 % of the true E, mean drawn from N(true E, that std): without it beta
+                        is not separable from E)
   bias-shift            inclinometer I1's probe has a bias shift: bias[I1] = +-b, b log-uniform in
                         (0.03, 0.5) mm/m (every slope reading off by b: the readings by b L_n)
   depth-offset          inclinometer I1 read deeper or shallower than recorded: zoff[I1] = +-d, d
@@ -201,6 +202,8 @@ def random_case(index: int, kind: str, master_seed: int, strong: bool = False) -
         "parameters": [e_param, {"name": "K0", "initial": float(rng.uniform(0.4, 1.6)), "bounds": [0.05, 5.0]}],
     }
     noise_seed = int(rng.integers(0, 2**31 - 1))
+    if e_prior:  # the laboratory's E is itself uncertain: its mean drawn from N(true E, its std)
+        e_prior["mean"] = float(E + e_prior["std"] * rng.standard_normal())
     truth = dict(values)  # the extra parameters' true values, by the names diagnose gives them
     if extra_layer:
         truth = {"E[clay_below]": extra_layer["E"], "depth[clay]": extra_layer["top"]}

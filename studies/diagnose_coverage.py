@@ -80,7 +80,8 @@ def intervals(rows: list[dict]) -> list[dict]:
             out.append({"case": r["case"], "kind": r["kind"], "parameter": c["name"], "truth": c["truth"],
                         "estimate": c["estimate"], "std": c["std"], "low": c["low"], "high": c["high"],
                         "covered": c["covered"], "standardised_error": z, "effect_size": r["effect_size"],
-                        "tentative": c["tentative"], "layout": r["layout"], "noise_seed": r["noise_seed"]})
+                        "tentative": c["tentative"], "accepted": r["accepted"], "layout": r["layout"],
+                        "noise_seed": r["noise_seed"]})
     return out
 
 

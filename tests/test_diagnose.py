@@ -99,3 +99,40 @@ def test_null_case_with_a_moving_model_toe_is_adequate():
     assert min(moves) >= 0.005, moves
     d = diagnose(analysis)
     assert d.adequate_before and not d.accepted
+
+
+def test_two_effects_are_reported_from_the_final_joint_fit(tmp_path):
+    """I1's toe moved and I2 has a bias shift: both accepted, in two rounds; the verdict, diagnosis.md
+    and diagnosis.json give each parameter from the final joint fit, not from its round."""
+    import numpy as np
+
+    from geoback.diagnosis import write_diagnosis
+    from geoback.diagnosis.report import verdict
+    from geoback.identification import prepare
+    from geoback.simulate import synthetic_readings
+
+    loaded = load_case(CONCEALED / "toe-moved.yaml")
+    readings = synthetic_readings(loaded, refine=2.0, values={"B[I1]": 0.004, "bias[I2]": 4e-4}, noise_seed=3)
+    analysis = prepare(loaded)
+    analysis = analysis.with_readings(np.concatenate([readings[b.name] for b in analysis.simulation.survey.blocks]))
+    d = diagnose(analysis)
+    assert sorted(s.hypothesis.kind for s in d.accepted) == ["bias-shift", "integration-constant"]
+    assert d.causes["instrument"] and not d.causes["ground"]
+    final = dict(zip(d.final.parameters.names, d.final_fit.p))
+    first = d.accepted[0]
+    name = first.hypothesis.names[0]
+    i = first.reliability.names.index(name)
+    assert first.refit.p[i] != final[name]  # the round's number differs from the joint fit's
+    text = verdict(d)
+    assert "final joint fit" in text
+    write_diagnosis(d, tmp_path, plots=False)
+    data = json.loads((tmp_path / "diagnosis.json").read_text())
+    md = (tmp_path / "diagnosis.md").read_text()
+    for s, item in zip(d.accepted, data["missing"]):
+        for n in s.hypothesis.names:
+            assert item["estimates"][n]["estimate"] == final[n]
+            assert f"{n} = {final[n]:.4g}" in text and f"{n} = {final[n]:.4g}" in md
+    truth = {"B[I1]": 0.004, "bias[I2]": 4e-4}  # (one draw: within 3 sigma, not necessarily inside the 95 %)
+    for n, t in truth.items():
+        j = d.final.parameters.names.index(n)
+        assert abs(final[n] - t) < 3 * d.final.reliability.std[j]

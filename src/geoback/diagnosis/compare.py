@@ -49,10 +49,12 @@ class Separation:
         parts = []
         if self.readings:
             r = self.readings[0]
-            parts.append(f"the existing readings that differ most are {r['instrument']} station {r['station']} "
+            lead = ("the existing readings that differ most are" if abs(r["sigmas"]) >= 2 else
+                    f"no existing reading tells them apart by more than {abs(r['sigmas']):.2g} σ (the most:")
+            parts.append(f"{lead} {r['instrument']} station {r['station']} "
                          f"({r['where']}: {abs(r['difference']) * 1e3:.2g} mm, {abs(r['sigmas']):.2g} σ)"
                          + ("".join(f", {q['instrument']} station {q['station']} ({abs(q['sigmas']):.2g} σ)"
-                                    for q in self.readings[1:3])))
+                                    for q in self.readings[1:3])) + (")" if abs(r["sigmas"]) < 2 else ""))
         if self.instruments:
             i = self.instruments[0]
             parts.append(f"instrument {i['instrument']} separates them most (whitened distance "

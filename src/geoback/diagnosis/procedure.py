@@ -64,6 +64,7 @@ COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mi
 DEPTH_SEEDS = 7  # layer-boundary depths refitted evenly over a layer before bisection
 REFIT_ITERATIONS = 100
 STALLED = 0.01  # a refit whose J fell by less than this in its last step has stopped moving
+LOSING = 50.0  # J units: a boundary whose best seed depth is this far above another refit is not refined
 
 
 @dataclass
@@ -458,10 +459,11 @@ def _boundary_hypothesis(h: Hypothesis, layer: str, z: float, E0: float) -> Hypo
 
 
 def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], settings: Settings, method: str,
-                          say) -> Scored:
+                          say, rival_J: float | None = None) -> Scored:
     """Profile the boundary depth over a continuous depth (``depth.py``): conforming refits at seed
     depths (the three best-scored and a few spread over the layer), then a search for the minimum
-    and for each end of the 95 % interval."""
+    (not when the best seed is LOSING J units above `rival_J`, the best refit of another
+    hypothesis: it cannot win); its 95 % interval is found if it is accepted."""
     layer = group[0].hypothesis.key.split("[", 1)[1].split("@")[0]
     sim = current.simulation
     case = sim.loaded.case
@@ -483,12 +485,12 @@ def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], se
     # best-scored depths, seed refits evenly over the layer
     key = f"zsplit[{layer}]"
     seeds = [t.hypothesis.extra_values[key] for t in group[:3]] + list(np.linspace(lo_z, hi_z, DEPTH_SEEDS + 2)[1:-1])
-    prof = profile_depth(layer, refit_at, lo_z, hi_z, seeds, _depth_tolerance(lo_z, hi_z), say)
+    prof = profile_depth(layer, refit_at, lo_z, hi_z, seeds, _depth_tolerance(lo_z, hi_z), say, interval=False,
+                         stop_above=None if rival_J is None else rival_J + LOSING)
     if not prof.points:
         raise RuntimeError(f"no depth of a boundary in '{layer}' could be meshed and refitted")
     best = prof.best
     best.profile = prof
-    best.hypothesis.description += f" The boundary's {prof.text()}."
     return best
 
 
@@ -508,6 +510,21 @@ def _reprofile_boundary(s: Scored, misfit: Misfit, f: Fit, settings: Settings, m
     seeds = [old.z_hat, old.low, old.high]
     return profile_depth(layer, refit_at, old.lo_limit, old.hi_limit, seeds,
                          _depth_tolerance(old.lo_limit, old.hi_limit), say)
+
+
+def _boundary_interval(rnd: Round, say) -> None:
+    """An accepted boundary: its depth's 95 % interval (a few more refits); if looking for an end
+    found a better depth, that depth is the accepted one."""
+    acc = rnd.accepted
+    say(f"profile-likelihood interval of the boundary depth in '{acc.profile.layer}'")
+    prof = acc.profile.interval()
+    best = prof.best
+    if best is not acc:
+        best.profile, best.p_score = prof, acc.p_score
+        _judge(best)
+        rnd.ranking[rnd.ranking.index(acc)] = best
+        rnd.accepted, rnd.tentative = best, not best.determined
+    rnd.accepted.hypothesis.description += f" The boundary's {prof.text()}."
 
 
 def _weigh(rnd: Round, cur_rel: Reliability, data) -> None:
@@ -595,11 +612,14 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         rounds.append(rnd)
         if adequate or k == max_rounds:
             break
-        for s in testable[:refit_top]:
+        chosen = testable[:refit_top]  # the plain hypotheses first: a searched depth that cannot beat them
+        for s in sorted(chosen, key=lambda t: bool(t.hypothesis.group)):  # is not searched in detail
             if s.hypothesis.group:
                 group = sorted((t for t in scored if t.hypothesis.group == s.hypothesis.group), key=lambda t: -t.score)
+                plain = [t.refit.J for t in chosen if not t.hypothesis.group and t.settled]
                 try:
-                    winner = _refit_layer_boundary(current, cur_fit, group, settings, method, say)
+                    winner = _refit_layer_boundary(current, cur_fit, group, settings, method, say,
+                                                   min(plain) if plain else None)
                 except RuntimeError as exc:
                     say(f"  {exc}")
                     continue
@@ -613,6 +633,8 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             _judge(s)
         significant = [s for s in ranking if s.refit is not None and s.p_lr < threshold and _settled(s.refit)]
         rnd.accepted, rnd.tentative = _choose(significant)
+        if rnd.accepted is not None and rnd.accepted.profile is not None:
+            _boundary_interval(rnd, say)
         _weigh(rnd, cur_rel, current.data)
         if rnd.accepted is None:
             rnd.adequate = chi2_ok and scales_ok  # nothing in the library does better

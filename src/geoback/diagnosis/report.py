@@ -161,8 +161,13 @@ def diagnosis_text(d) -> str:
         if rnd.adequate and rnd.accepted is None:
             scales = (", every estimated error scale is within what the case allows"
                       if any(e.estimated for e in rnd.scales) else "")
-            lines += [f"- adequate: the χ² test passes at the {100 * d.alpha:g} % level{scales} and no hypothesis' "
-                      f"score test is significant at {rnd.threshold:.2g} (= {d.alpha:g} / number of hypotheses); stop"]
+            flagged = [s for s in rnd.ranking if s.collinear_with is None and s.p_score < rnd.threshold]
+            tests = (f"no hypothesis' score test is significant at {rnd.threshold:.2g} (= {d.alpha:g} / number of "
+                     f"hypotheses)" if not flagged else
+                     f"the score test{'s' if len(flagged) > 1 else ''} of {', '.join(s.hypothesis.title for s in flagged)}"
+                     f" {'are' if len(flagged) > 1 else 'is'} significant at {rnd.threshold:.2g}, but no refit "
+                     f"improves the fit significantly (the score test is a linear approximation)")
+            lines += [f"- adequate: the χ² test passes at the {100 * d.alpha:g} % level{scales} and {tests}; stop"]
         else:
             lines += ["- where the model and the readings differ:"] + [f"  - {m.text}" for m in rnd.mismatches[:4]]
         if rnd.ranking:
