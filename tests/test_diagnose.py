@@ -39,6 +39,10 @@ def test_concealed_effect_is_named_estimated_and_fixes_the_fit(name):
     assert lo[i] <= truth <= hi[i], (param, d.final_fit.p[i], rel.std[i])
     assert d.adequate_after
     assert rel.reduced_chi2 < d.baseline_reliability.reduced_chi2
+    if name == "layer-boundary":  # the depth by profile likelihood over a continuous depth, with its interval
+        prof = d.depth_profile(d.accepted[0])
+        assert prof.has_interval and prof.low <= 16.0 <= prof.high and prof.high - prof.low < 1.0
+        assert not prof.low_open and not prof.high_open
     cause = "instrument" if name in INSTRUMENT else "ground"
     assert [s.hypothesis.cause for s in d.accepted] == [cause]
     assert d.causes[cause] and not d.causes["ground" if cause == "instrument" else "instrument"]
@@ -136,3 +140,32 @@ def test_two_effects_are_reported_from_the_final_joint_fit(tmp_path):
     for n, t in truth.items():
         j = d.final.parameters.names.index(n)
         assert abs(final[n] - t) < 3 * d.final.reliability.std[j]
+
+
+def test_deep_rigid_stratum_is_a_tentative_answer():
+    """A rigid stratum below 30 m: the boundary is found, but its modulus is not determined by the
+    readings, so the answer is tentative (said so), with an open profile-likelihood interval."""
+    import numpy as np
+    import yaml
+
+    from geoback.case import LoadedCase, case_from_data
+    from geoback.diagnosis.report import verdict
+    from geoback.identification import prepare
+    from geoback.simulate import synthetic_readings
+
+    loaded = load_case(CONCEALED / "null-1.yaml")
+    data = yaml.safe_load((CONCEALED / "null-1.yaml").read_text())
+    data["ground"]["layers"].append({"name": "rock", "top": 30.0, "E": 2.0e6, "nu": 0.3})
+    for ins in data["instruments"]:
+        ins.pop("readings_file", None)
+    truth = LoadedCase(case_from_data(data), loaded.path, {})
+    readings = synthetic_readings(truth, refine=2.0, noise_seed=7)
+    analysis = prepare(loaded)
+    analysis = analysis.with_readings(np.concatenate([readings[b.name] for b in analysis.simulation.survey.blocks]))
+    d = diagnose(analysis)
+    s = d.accepted[0]
+    assert s.hypothesis.kind == "layer-boundary" and not s.determined and d.rounds[0].tentative
+    prof = d.depth_profile(s)
+    assert prof.low <= 30.0 <= prof.high
+    assert d.open_ends("E[clay_below]") == (False, True)  # bounded below only
+    assert "TENTATIVE" in verdict(d)

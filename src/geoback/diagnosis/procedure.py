@@ -659,9 +659,10 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
 
 
 def _open_intervals(final: Identification, misfit: Misfit, settings: Settings, names: list[str]) -> dict:
-    """Profile-likelihood intervals of the accepted parameters `conclude` leaves linearised although
-    they are not determined or ended at a bound (an end at a limit is open: the readings do not
-    bound the parameter there)."""
+    """Profile-likelihood intervals of every accepted parameter `conclude` left linearised (the
+    missing physics is where the model is most non-linear in its parameters: a modulus gradient, a
+    stratum's modulus; a few dozen fast fits each). An end at a limit (a bound or the allowed range)
+    is open: the readings do not bound the parameter there."""
     from ..parameters import parameter_limits
     from ..profile import profile_interval
 
@@ -674,9 +675,7 @@ def _open_intervals(final: Identification, misfit: Misfit, settings: Settings, n
         if name in final.profiled or name not in params.names:
             continue
         i = params.names.index(name)
-        sd, v = float(rel.std[i]), float(f.p[i])
-        if not (f.at_bound[i] or not np.isfinite(sd) or sd >= 0.3 * abs(v)):
-            continue
+        sd = float(rel.std[i])
         lim = parameter_limits(misfit.simulation, name, values)
         lo, hi = max(params.lower[i], lim.lo), min(params.upper[i], lim.hi)
         try:

@@ -59,7 +59,8 @@ def _accepted_words(d, s) -> str:
             ends = (f"from {'its lower limit' if lo_open else _num(lo)} to {'its upper limit' if hi_open else _num(hi)}"
                     f" by profile likelihood, open where the readings do not bound it")
             return f"{n} = {v:.4g}{unit.get(n, '')} (95 % {ends})"
-        return f"{n} = {v:.4g} ± {sd:.2g}{unit.get(n, '')} (95 % [{_num(lo)}, {_num(hi)}])"
+        how = ", profile likelihood" if (n in d.final_intervals or n in d.final.profiled) else ""
+        return f"{n} = {v:.4g} ± {sd:.2g}{unit.get(n, '')} (95 % [{_num(lo)}, {_num(hi)}]{how})"
 
     est = "; ".join(one(*e) for e in d.estimates(s))
     prof = d.depth_profile(s)
@@ -244,7 +245,9 @@ def _item(d, s, final: bool) -> dict:
             item["depth"] = s.profile.as_dict()
     if final:  # an accepted hypothesis: its parameters from the final joint fit
         item["estimates_in_round"] = item.pop("estimates", {})
-        item["estimates"] = {n: {"estimate": v, "std": sd, "ci95": [lo, hi], "from": "final joint fit"}
+        item["estimates"] = {n: {"estimate": v, "std": sd, "ci95": [lo, hi], "from": "final joint fit",
+                                 "interval": ("profile likelihood" if (n in d.final_intervals or n in d.final.profiled)
+                                              else "linearised"), "ci95_open": list(d.open_ends(n))}
                              for n, v, sd, lo, hi in d.estimates(s)}
         prof = d.depth_profile(s)
         if prof is not None:
