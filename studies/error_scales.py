@@ -93,7 +93,7 @@ SCALE_HEADER = ["layout", "instrument", "true_k", "readings", "mean_k2", "se_mea
 
 
 def summarise(res: dict) -> tuple[list[dict], list[dict]]:
-    from geoback.scales import chi2_ppf
+    from geoback.scale_estimates import chi2_ppf
 
     N = res["N"]
     rows, scale_rows = [], []

@@ -4,6 +4,8 @@ import tempfile
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = ROOT / "cases"
@@ -11,13 +13,19 @@ CASES = ROOT / "cases"
 if not os.environ.get("GEOBACK_CACHE"):
     os.environ["GEOBACK_CACHE"] = tempfile.mkdtemp(prefix="geoback-test-cache-")
 
+# Property tests draw the same examples on every run, so CI is reproducible; set
+# HYPOTHESIS_PROFILE=explore to draw new ones (a failure prints the example to add as a regression test).
+settings.register_profile("reproducible", derandomize=True, database=None)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "reproducible"))
+
 
 # The quick tier (`pytest -m quick`, under 90 s) for the edit-test loop: the numerical core
 # (covariances, solver, FE model, sensitivities, the seam, identification, instruments, reliability).
 # The default suite (`pytest`, what CI runs) adds the commands, figures, diagnosis, studies and
 # bad-input tests; `pytest -m slow` the long verification runs.
 QUICK_MODULES = {"test_covariance", "test_solver", "test_fem", "test_instruments", "test_identify",
-                 "test_sensitivity_extensions", "test_seam"}
+                 "test_sensitivity_extensions", "test_seam", "test_staged"}
 
 
 def pytest_collection_modifyitems(config, items):

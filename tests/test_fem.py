@@ -378,3 +378,37 @@ def test_patch_linear_field_has_no_interior_residual(shallow, nu):
     assert np.abs(r[rows]).max() <= 1e-10 * scale.max()
     # and the boundary rows do carry the traction of the uniform stress (the test is not vacuous)
     assert np.abs(r).max() > 1e-6 * scale.max()
+
+
+# ---------------------------------------------------------------------------- shape functions and quadrature
+def test_shape_functions_and_quadrature_rules():
+    """Kronecker property at the nodes, partition of unity, gradients against differences, and the
+    rules integrate monomials exactly up to their degree (x^a y^b over the triangle: a! b! / (a+b+2)!)."""
+    from math import factorial
+
+    from geoback.shapes import Element, line_rule, triangle_rule
+
+    nodes = {("triangle", 1): [[0, 1, 0], [0, 0, 1]], ("triangle", 2): [[0, 1, 0, .5, .5, 0], [0, 0, 1, 0, .5, .5]],
+             ("line", 1): [[0, 1]], ("line", 2): [[0, 1, .5]]}
+    rng = np.random.default_rng(3)
+    for (cell, order), X in nodes.items():
+        e = Element(cell, order)
+        N, _ = e.basis(np.array(X, float))
+        np.testing.assert_allclose(N, np.eye(e.nodes), atol=1e-15)
+        P = rng.random((len(X), 7)) * (0.5 if cell == "triangle" else 1)
+        N, dN = e.basis(P)
+        np.testing.assert_allclose(N.sum(axis=0), 1.0, atol=1e-14)
+        for k in range(len(X)):
+            h = np.zeros((len(X), 1))
+            h[k] = 1e-6
+            fd = (e.basis(P + h)[0] - e.basis(P - h)[0]) / 2e-6
+            np.testing.assert_allclose(dN[:, k], fd, atol=1e-8)
+    for degree in (2, 4):
+        X, W = triangle_rule(degree)
+        for a in range(degree + 1):
+            for b in range(degree + 1 - a):
+                exact = factorial(a) * factorial(b) / factorial(a + b + 2)
+                assert W @ (X[0] ** a * X[1] ** b) == pytest.approx(exact, rel=1e-13)
+    X, W = line_rule(6)
+    for a in range(7):
+        assert W @ X[0] ** a == pytest.approx(1 / (a + 1), rel=1e-13)

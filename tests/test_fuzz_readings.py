@@ -94,11 +94,12 @@ def mutate(kinds: list[str], rnd: random.Random) -> tuple[bytes, bool, float]:
             pick()[2] = "1e400"
             exact = False
         elif kind == "stage_column":
+            twice = any(h.lower() == "stage" for h in header)  # two stage columns are ambiguous: refused
             header.append("stage")
             for r in rows:
                 if len(r) == 3:
                     r.append(rnd.choice(["excavation", "excavation", "heading"]))
-            exact = exact and all(r[3] == "excavation" for r in rows if len(r) == 4)
+            exact = False if twice else exact and all(r[3] == "excavation" for r in rows if len(r) == 4)
         elif kind == "crlf":
             eol = "\r\n"
     keys = sorted((str(r[0]), str(r[1])) for r in rows if len(r) >= 3)
@@ -109,11 +110,11 @@ def mutate(kinds: list[str], rnd: random.Random) -> tuple[bytes, bool, float]:
     text = prefix + eol.join(lines) + eol
     data = text.encode(enc)
     for kind in kinds:
-        if kind == "garbage_bytes":
+        if kind == "garbage_bytes" and data:
             i = rnd.randrange(len(data))
             data = data[:i] + bytes([rnd.randrange(256)]) + data[i + 1:]
             exact = None  # may or may not still read; it must not crash
-        elif kind == "truncate":
+        elif kind == "truncate" and data:
             data = data[:rnd.randrange(len(data))]
             exact = None
         elif kind == "no_header":

@@ -151,3 +151,10 @@ def test_chi2_survival_function_matches_scipy():
             got = chi2_sf(x, dof)
             assert abs(got - expected) <= 1e-9 * expected + 1e-300, (dof, x, got, expected)
     assert np.isnan(chi2_sf(3.0, 0)) and chi2_sf(0.0, 4) == 1.0
+    from geoback import chi2
+
+    for dof in (0.7, 2, 3.3, 51, 5000):
+        for q in (1e-6, 0.025, 0.5, 0.975, 0.999999):
+            x = float(2 * special.gammaincinv(dof / 2, q))
+            assert chi2.ppf(q, dof) == pytest.approx(x, rel=1e-10)
+            assert chi2.cdf(x, dof) == pytest.approx(q, rel=1e-10)

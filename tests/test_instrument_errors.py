@@ -21,7 +21,8 @@ def analysis():
 def test_error_names_belong_to_inclinometers(analysis):
     survey = analysis.simulation.survey
     assert survey.error_names == ["bias[I1]", "zoff[I1]", "bias[I2]", "zoff[I2]"]
-    assert survey.P.shape[0] == survey.m + 2 * 19  # readings, then each inclinometer's depth derivatives
+    assert survey.P.shape[0] == survey.m and survey.D.shape[0] == 2 * 19  # readings; each inclinometer's depth derivatives
+    assert survey.operator({}).shape[0] == survey.m + 2 * 19  # what a physics reading depth offsets computes
 
 
 def test_bias_shift_grows_linearly_from_the_reference_end(analysis):

@@ -23,9 +23,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-import geoback.outputs as outputs
+import geoback.resultsets as outputs
+from geoback.outputs import write_atomic
 from geoback.case import load_case
-from geoback.outputs import ResultFolderError, check_result_set, result_set
+from geoback.resultsets import ResultFolderError, check_result_set, result_set
 from measure import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -113,7 +114,7 @@ def test_other_places_checked_before_any_work(tmp_path, env):
 # ---------------------------------------------------------------------------- result_set itself
 def _write(folder: Path, files: dict[str, str]) -> None:
     for name, text in files.items():
-        outputs.write_atomic(folder / name, text)
+        write_atomic(folder / name, text)
 
 
 def _visible(folder: Path) -> dict[str, str]:

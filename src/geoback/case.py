@@ -86,8 +86,11 @@ class LoadedCase:
 
 
 def stage_names(case: Case) -> list[str]:
-    """Names of the construction stages readings can be taken at, in construction order."""
-    return ["excavation"]
+    """Names of the construction stages readings can be taken at, in construction order
+    (the case's construction section; 'excavation' without one)."""
+    from .construction import stage_names as names
+
+    return names(case)
 
 
 def load_case(path: str | Path, allow_large: bool = False) -> LoadedCase:

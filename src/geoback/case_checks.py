@@ -44,8 +44,8 @@ def _point_problem(g: Geometry, p: tuple, what: str) -> str | None:
     return None
 
 
-def _instrument_problems(g: Geometry, i: int, ins) -> list[tuple[tuple, str]]:
-    at, out = ("instruments", i), []
+def _instrument_problems(g: Geometry, i: int, ins, at: tuple | None = None) -> list[tuple[tuple, str]]:
+    at, out = at or ("instruments", i), []
     if ins.kind == "points":
         for j, p in enumerate(ins.points):
             why = _point_problem(g, p, "a point")
@@ -247,13 +247,151 @@ def physical_problems(case: Case, allow_large: bool = False) -> list[tuple[tuple
         if p.log and p.initial <= 0:
             problems.append((("parameters", i, "initial"),
                              f"expected a positive initial value for a log-transformed parameter, found {_g(p.initial)}"))
+    from .construction import construction_problems
+
+    problems.extend(construction_problems(case))
     pnames = [p.name for p in case.parameters]
     for i, n in enumerate(pnames):
         if pnames.index(n) != i:
             problems.append((("parameters", i, "name"),
                              f"expected each parameter once, found '{n}' again (as in parameters[{pnames.index(n)}])"))
     problems.extend(_error_scale_problems(case))
+    problems.extend(forecast_problems(case))
+    problems.extend(design_problems(case))
     return problems
+
+
+def expand_candidates(design) -> list[tuple[int, object]]:
+    """(index in design.candidates, instrument) for every candidate, one per value of its `vary`
+    field (named e.g. 'I2-x6', or 'S2-3' for the third of other values); a variant that does not validate raises ValueError."""
+    out = []
+    for i, c in enumerate(design.candidates):
+        if not c.vary:
+            out.append((i, c))
+            continue
+        (field, values), = c.vary.items()
+        base = c.model_dump(exclude={"vary"})
+        for k, v in enumerate(values):
+            number = isinstance(v, (int, float)) and not isinstance(v, bool)
+            name = f"{c.name}-{field}{_g(v)}" if number else f"{c.name}-{k + 1}"
+            out.append((i, type(c).model_validate({**base, field: v, "name": name})))
+    return out
+
+
+def design_problems(case: Case) -> list[tuple[tuple, str]]:
+    """Candidates without readings, at known stages, in the ground; `vary` one field of theirs;
+    targets that are forecasts of the case."""
+    from pydantic import ValidationError
+
+    from .construction import stage_names
+
+    d = case.design
+    if d is None:
+        return []
+    out, g, stages = [], case.geometry, stage_names(case)
+    forecasts = [f.name for f in case.forecasts]
+    for j, name in enumerate(d.forecasts or []):
+        if name not in forecasts:
+            out.append((("design", "forecasts", j), f"expected the name of a forecast of the case "
+                                                    f"({', '.join(forecasts) or 'none'}), found '{name}'"))
+    if d.objective == "forecasts" and not forecasts:
+        out.append((("design", "objective"), "expected forecasts in the case for objective 'forecasts' (or "
+                                             "objective: parameters), found none"))
+    for i, c in enumerate(d.candidates):
+        at = ("design", "candidates", i)
+        if c.readings is not None or c.readings_file is not None:
+            out.append((at + ("readings" if c.readings is not None else "readings_file",),
+                        "expected no readings for a candidate instrument (not installed yet), found some"))
+        if c.read_at is not None and c.read_at not in stages:
+            out.append((at + ("read_at",), f"expected one of the construction stages ({', '.join(stages)}), "
+                                           f"found '{c.read_at}'"))
+        if c.vary is not None:
+            fields = set(type(c).model_fields) - {"name", "kind", "vary", "read_at", "readings", "readings_file"}
+            if len(c.vary) != 1:
+                out.append((at + ("vary",), f"expected one field to vary, found {len(c.vary)}"))
+                continue
+            (field, values), = c.vary.items()
+            if field not in fields:
+                out.append((at + ("vary",), f"expected one of the {c.kind}'s fields ({', '.join(sorted(fields))}), "
+                                            f"found '{field}'"))
+                continue
+            if not values:
+                out.append((at + ("vary", field), "expected at least one value, found an empty list []"))
+                continue
+    if out:
+        return out
+    try:
+        expanded = expand_candidates(d)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        return [(("design", "candidates"), f"expected every varied candidate to be a valid instrument, found "
+                                           f"{'.'.join(map(str, err['loc']))}: {err['msg']}")]
+    names = [c.name for _, c in expanded] + [ins.name for ins in case.instruments]
+    for i, c in expanded:
+        if names.count(c.name) > 1:
+            out.append((("design", "candidates", i, "name"), f"expected candidate names different from each other "
+                                                             f"and from the instruments', found '{c.name}' twice"))
+        for path, why in _instrument_problems(g, i, c, ("design", "candidates", i)):
+            out.append((path, f"{c.name}: {why}"))
+    return out
+
+
+def line_points(start, end, count: int) -> list[tuple[float, float]]:
+    """`count` evenly spaced points from `start` to `end` (a line forecast's points)."""
+    return [(start[0] + (end[0] - start[0]) * k / (count - 1), start[1] + (end[1] - start[1]) * k / (count - 1))
+            for k in range(count)]
+
+
+def forecast_problems(case: Case) -> list[tuple[tuple, str]]:
+    """Forecasts name known stages and instruments, lie in the ground and outside the tunnel, and
+    ask for the lining only where there is one."""
+    from .construction import stage_names
+
+    g, out = case.geometry, []
+    stages = stage_names(case)
+    names = [f.name for f in case.forecasts]
+    instruments = [ins.name for ins in case.instruments]
+    lining = case.construction.lining if case.construction is not None else None
+    installed = next((k for k, s in enumerate(case.construction.stages) if s.install is not None), None) \
+        if case.construction is not None else None
+    for i, f in enumerate(case.forecasts):
+        at = ("forecasts", i)
+        if names.index(f.name) != i:
+            out.append((at + ("name",), f"expected unique forecast names, found '{f.name}' again "
+                                        f"(as in forecasts[{names.index(f.name)}])"))
+        if f.stage is not None and f.stage not in stages:
+            out.append((at + ("stage",), f"expected one of the construction stages ({', '.join(stages)}), "
+                                         f"found '{f.stage}'"))
+            continue
+        stage = stages.index(f.stage) if f.stage is not None else len(stages) - 1
+        if f.kind in ("points", "convergence"):
+            for j, p in enumerate(f.points):
+                why = _point_problem(g, p, "a point" if f.kind == "points" else "a chord end")
+                if why:
+                    out.append((at + ("points", j), why))
+        elif f.kind == "line":
+            for key, p in (("start", f.start), ("end", f.end)):
+                why = _point_problem(g, p, f"the line's {key}")
+                if why:
+                    out.append((at + (key,), why))
+            if all(_point_problem(g, p, "") is None for p in (f.start, f.end)):
+                inside = [p for p in line_points(f.start, f.end, f.points) if _point_problem(g, p, "") is not None]
+                if inside:
+                    out.append((at + ("points",), f"expected the line's points outside the excavated tunnel "
+                                                  f"({_tunnel_text(g)}), found {len(inside)} of {f.points} inside it, "
+                                                  f"e.g. ({_g(inside[0][0])}, {_g(inside[0][1])})"))
+        elif f.kind == "instrument" and f.instrument not in instruments:
+            out.append((at + ("instrument",), f"expected the name of an instrument of the case "
+                                              f"({', '.join(instruments) or 'none'}), found '{f.instrument}'"))
+        elif f.kind == "lining":
+            if lining is None:
+                out.append((at + ("kind",), "expected a case with a lining (construction.lining) for a lining "
+                                            "forecast, found none"))
+            elif installed is None or stage < installed:
+                out.append((at + ("stage",), f"expected a stage at or after the lining's installation "
+                                             f"({stages[installed] if installed is not None else 'never installed'}), "
+                                             f"found '{stages[stage]}'"))
+    return out
 
 
 def _reading_count(ins) -> int:

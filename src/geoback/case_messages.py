@@ -5,9 +5,9 @@ from __future__ import annotations
 import difflib
 from typing import Any
 
-from .case_schema import (Case, Convergence, Deflectometer, ErrorScale, FitSettings, Geometry, Ground, Inclinometer,
-                          Layer, MeshSettings, Output, Parameter, PointsInstrument, Prior, ScalePrior,
-                          SlidingMicrometer, _g, _show)
+from .case_schema import (Case, Construction, Convergence, Deflectometer, ErrorScale, FitSettings, Geometry, Ground,
+                          Inclinometer, Layer, Lining, MeshSettings, Output, Parameter, PointsInstrument, Prior,
+                          ScalePrior, SlidingMicrometer, Stage, _g, _show)
 from .yamlmarks import locate, printable
 
 
@@ -16,8 +16,9 @@ _KINDS = {"points": PointsInstrument, "inclinometer": Inclinometer, "sliding_mic
           "extensometer": SlidingMicrometer, "deflectometer": Deflectometer, "convergence": Convergence}
 _CHILDREN: dict = {Case: {"geometry": Geometry, "ground": Ground, "mesh": MeshSettings, "instruments": "instrument",
                           "parameters": Parameter, "fit": FitSettings, "output": Output,
-                          "error_scales": ErrorScale},
-                   Ground: {"layers": Layer}, Parameter: {"prior": Prior}, ErrorScale: {"prior": ScalePrior}}
+                          "error_scales": ErrorScale, "construction": Construction},
+                   Ground: {"layers": Layer}, Parameter: {"prior": Prior}, ErrorScale: {"prior": ScalePrior},
+                   Construction: {"lining": Lining, "stages": Stage}}
 _PATTERNS = {r"^[A-Za-z0-9_\-.]+$": "a name of letters, digits, '_', '-' or '.' (no spaces)",
              r"^[A-Za-z_][A-Za-z0-9_\-]*$": "a name starting with a letter or '_', then letters, digits, '_' or '-'",
              r"^[A-Za-z_][A-Za-z0-9_]*(\[[A-Za-z0-9_\-.]+\])?$":

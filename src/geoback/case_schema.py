@@ -327,6 +327,140 @@ class FitSettings(Strict):
     objective_tol: Positive = 1e-10
     weighting: Literal["full", "diagonal", "identity"] = Field(
         "full", description="C_x used in J: the instruments' full covariance (eqn 9), its diagonal, or I (eqn 8)")
+    mesh_error: Literal["check", "include", "ignore"] = Field(
+        "check", description="discretisation error of the readings, from one run at the estimate on a mesh twice as "
+                             "fine: 'check' reports it against each reading's sigma (a warning above 0.3 sigma); "
+                             "'include' adds it to C_x and fits again; 'ignore' skips the check")
+
+
+class Lining(Strict):
+    """An elastic lining: a ring of its real thickness inside the excavated boundary (meshed with
+    `layers` quadratic elements through the thickness), installed stress-free at a stage."""
+
+    name: str = Field("lining", pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$",
+                      description="name of the lining (its parameters are E[name] and nu[name])")
+    thickness: Positive = Field(description="thickness of the lining [m]; its outer face is the excavated wall")
+    E: Stress = Field(gt=0, description="Young's modulus of the lining [kPa] (or '30 GPa')")
+    nu: Num = Field(ge=0.0, lt=0.5, description="Poisson's ratio of the lining, 0 <= nu < 0.5")
+    layers: Annotated[int, BeforeValidator(_whole), Field(ge=1, le=8)] = Field(
+        2, description="quadratic elements through the lining's thickness (bending needs at least 2)")
+
+
+class Stage(Strict):
+    """One construction step. In a stage the lining named by `install` is placed first (stress-free,
+    on the wall as it has moved so far), then the in-situ stress on the tunnel wall is released up to
+    the cumulative fraction `release`."""
+
+    name: StageName = Field(description="stage name (readings are tagged with it)")
+    release: Optional[Annotated[float, BeforeValidator(_number), Field(gt=0.0, le=1.0)]] = Field(
+        None, description="cumulative fraction of the in-situ stress on the tunnel wall released by the end of "
+                          "this stage (beta_k, 0 < beta <= 1, increasing from stage to stage)")
+    install: Optional[str] = Field(None, description="name of the lining installed at the start of this stage")
+
+
+class Construction(Strict):
+    """Staged construction (convergence-confinement): stress released in steps, a lining between them."""
+
+    lining: Optional[Lining] = Field(None, description="the lining (installed by a stage's 'install')")
+    stages: list[Stage] = Field(min_length=1, description="construction stages in order")
+
+
+class _Forecast(Strict):
+    name: str = Field(pattern=NAME, description="unique forecast name (files and figures use it)")
+    stage: Optional[StageName] = Field(None, description="construction stage the forecast is for (default: the last)")
+    alert: Optional[Positive] = Field(
+        None, description="alert level of the forecast quantity's magnitude, in its unit (m, kN/m, kNm/m): the "
+                          "probability that it is exceeded is reported")
+
+
+class PointsForecast(_Forecast):
+    """Displacement components at listed points (a building, a utility)."""
+
+    kind: Literal["points"]
+    points: list[Point] = Field(min_length=1, description="[x, y] of each point [m]")
+    components: list[Literal["ux", "uy"]] = Field(["uy"], min_length=1)
+
+
+class LineForecast(_Forecast):
+    """A displacement component at evenly spaced points of a straight line (a settlement trough)."""
+
+    kind: Literal["line"]
+    start: Point = Field(description="first point [x, y] [m]")
+    end: Point = Field(description="last point [x, y] [m]")
+    points: Annotated[int, BeforeValidator(_whole), Field(ge=2, le=2000)] = Field(
+        41, description="number of evenly spaced points from start to end")
+    component: Literal["ux", "uy"] = Field("uy", description="displacement component (uy: up positive)")
+
+
+class ChordForecast(_Forecast):
+    """Change of length of a chord between two points (convergence; shortening negative)."""
+
+    kind: Literal["convergence"]
+    points: tuple[Point, Point]
+
+
+class InstrumentForecast(_Forecast):
+    """What an instrument of the case will read at `stage` (its readings convention; integration
+    constants of a future survey not included)."""
+
+    kind: Literal["instrument"]
+    instrument: str = Field(pattern=NAME, description="name of an instrument of the case")
+
+
+class LiningForecast(_Forecast):
+    """Section forces around the lining (thrust N [kN/m], bending moment M [kNm/m], shear V [kN/m])."""
+
+    kind: Literal["lining"]
+    quantities: list[Literal["N", "M", "V"]] = Field(["N", "M"], min_length=1)
+
+
+Forecast = Annotated[Union[PointsForecast, LineForecast, ChordForecast, InstrumentForecast, LiningForecast],
+                     Field(discriminator="kind")]
+
+
+class _Candidate(Strict):
+    """An instrument that could be installed: defined as in `instruments` (without readings), read at
+    `read_at`; `vary` makes one candidate per value of one of its fields (e.g. {x: [3, 6, 9]})."""
+
+    read_at: Optional[StageName] = Field(None, description="stage the candidate would be read at (default: the "
+                                                           "last stage with readings)")
+    vary: Optional[dict[str, list[Any]]] = Field(
+        None, description="one field and its values, one candidate per value (e.g. {x: [3, 6, 9, 12]})")
+
+
+class PointsCandidate(PointsInstrument, _Candidate):
+    pass
+
+
+class InclinometerCandidate(Inclinometer, _Candidate):
+    pass
+
+
+class SlidingMicrometerCandidate(SlidingMicrometer, _Candidate):
+    pass
+
+
+class DeflectometerCandidate(Deflectometer, _Candidate):
+    pass
+
+
+class ConvergenceCandidate(Convergence, _Candidate):
+    pass
+
+
+Candidate = Annotated[Union[PointsCandidate, InclinometerCandidate, SlidingMicrometerCandidate,
+                            DeflectometerCandidate, ConvergenceCandidate], Field(discriminator="kind")]
+
+
+class Design(Strict):
+    """`geoback design`: which candidate instrument would narrow the forecasts (or C_p) most."""
+
+    objective: Optional[Literal["forecasts", "parameters"]] = Field(
+        None, description="'forecasts': the variance of the target forecasts; 'parameters': ln det C_p (default: "
+                          "forecasts if the case has any)")
+    forecasts: Optional[list[Annotated[str, Field(pattern=NAME)]]] = Field(
+        None, description="names of the forecasts to narrow (default: all)")
+    candidates: list[Candidate] = Field(min_length=1, description="candidate instruments")
 
 
 class Output(Strict):
@@ -341,9 +475,15 @@ class Case(Strict):
     ground: Ground
     mesh: MeshSettings = MeshSettings()
     instruments: list[Instrument] = Field(default_factory=list)
+    construction: Optional[Construction] = Field(
+        None, description="construction stages (release fractions, a lining); default: one excavation step")
     error_scales: list[ErrorScale] = Field(
         default_factory=list, description="instruments whose stated sigma is known only up to a factor "
                                           "(estimated with the parameters); the others' sigma is taken as exact")
     parameters: list[Parameter] = Field(default_factory=list)
     fit: FitSettings = FitSettings()
+    forecasts: list[Forecast] = Field(
+        default_factory=list, description="quantities to forecast at the estimate with their 95 % band (points, "
+                                          "lines, chords, an instrument's next readings, the lining's forces)")
+    design: Optional[Design] = Field(None, description="candidate instruments for `geoback design`")
     output: Output = Output()

@@ -14,7 +14,9 @@ and a sentence that says what was found and what to check. Codes:
 | `implausible-value` | an estimate outside the usual range for ground |
 | `implausible-input` | a value of the case outside the usual range (a unit slip?) |
 | `exactly-determined` | as many readings as parameters: χ² cannot test the model |
+| `mesh-error` | the mesh's discretisation error on a reading above 0.3 of its sigma |
 | `error-scale` | an estimated error scale beyond what the case allows for it (its prior, or the other instruments) |
+| `forecast-nonlinear` | a forecast's linearised 95 % band and the range sampled through the model differ by more than 10 % |
 """
 from __future__ import annotations
 
@@ -50,7 +52,7 @@ def fit_caveats(fit, rel, params, limits, profiled: dict) -> list[Caveat]:
     if not fit.moved:
         out.append(Caveat("did-not-move", "the fit stopped without moving from the initial values: no step "
                                           "decreased J (check the initial values and bounds; try --method lm)"))
-    if rel.dof == 0:
+    if rel.total_dof == 0:  # (rel.dof is 0 too when every instrument's scale is estimated: not this)
         out.append(Caveat("exactly-determined", "as many readings as parameters: the fit is exact and chi-square "
                                                 "cannot test the model"))
     elif rel.dof > 0 and rel.p_value < ALPHA:

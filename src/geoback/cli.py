@@ -40,7 +40,7 @@ def friendly(func):
             _err(str(exc))
             raise typer.Exit(2) from None
         except KeyboardInterrupt:
-            from .outputs import interrupted_note
+            from .resultsets import interrupted_note
 
             _err(f"interrupted; {interrupted_note()}")
             raise typer.Exit(130) from None
@@ -73,7 +73,7 @@ OUT_HELP = ("output folder (default results/<name>); this command's previous res
 
 def _check_out(out: Optional[str], option: str = "--out", **kwargs) -> Optional[Path]:
     """--out refused before any work when it cannot take results (a file, '', not writable, ...)."""
-    from .outputs import check_out
+    from .resultsets import check_out
 
     return check_out(out, option, **kwargs)
 
@@ -124,7 +124,7 @@ def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
     """Mesh the case with gmsh; write mesh.msh and mesh.vtu."""
     out = _check_out(out)
     from .mesh import build_mesh, write_mesh
-    from .outputs import result_set
+    from .resultsets import result_set
 
     loaded = _load(case, allow_large)
     folder = _out_dir(loaded, out)
@@ -170,7 +170,9 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
             raise GeobackError(f"--refine must be at least 1 (a mesh finer than the case's), found {factor:g}")
         if readings_out is None:
             _out_dir(loaded, out)
-        readings = synthetic_readings(loaded, factor, assignments, noise_seed=seed if noise else None)
+        staged = loaded.case.construction is not None
+        readings = synthetic_readings(loaded, factor, assignments, noise_seed=seed if noise else None,
+                                      by_stage=staged)
         target = readings_out or _out_dir(loaded, out) / "readings.csv"
         used = ", ".join(f"{k} = {v}" for k, v in assignments.items()) or "the case's values"
         mesh = "the case's mesh (inverse crime: fitting these readings on it proves little)" if factor == 1 else \
@@ -178,7 +180,8 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
         notes = [f"geoback simulate {case.name}: {used}; {mesh}" + (f"; noise from each C_x, seed {seed}" if noise
                                                                     else "; no noise")]
         write_readings_csv(loaded, readings, target, notes)
-        typer.echo(f"{sum(len(v) for v in readings.values())} readings ({used}; {mesh}"
+        count = sum(len(v) for sets in readings.values() for v in (sets.values() if staged else [sets]))
+        typer.echo(f"{count} readings ({used}; {mesh}"
                    f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
         return
     if refine not in (None, 1.0):
@@ -191,7 +194,8 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
     res = run_simulation(analysis, folder, values=values, vtu=vtu and loaded.case.output.vtu)
     used = ", ".join(f"{k} = {v}" for k, v in assignments.items())
     typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs"
-               f"{' with ' + used if used else ''} -> {folder}/predicted.csv")
+               f"{' with ' + used if used else ''} -> {folder}/predicted.csv"
+               + (", lining.csv, lining.png" if res.get("lining") is not None else ""))
 
 
 @app.command()
@@ -275,6 +279,35 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         raise typer.Exit(1)
     if strict and res.caveats:
         raise typer.Exit(3)
+
+
+@app.command()
+@friendly
+def design(case: Path = typer.Argument(..., help="case file (YAML) with a design section"),
+           out: Optional[str] = typer.Option(None, help=OUT_HELP),
+           plots: bool = typer.Option(True, help="write the figure (design.png, design.svg)"),
+           allow_large: bool = _allow_large()):
+    """Rank candidate instruments by how much they would narrow the forecasts (or the parameters)."""
+    out = _check_out(out)
+    loaded = _load(case, allow_large)
+    if loaded.case.design is None:
+        raise loaded.error(("design",), "expected a design section with candidate instruments (see `geoback "
+                                        "init`), found none")
+    folder = _out_dir(loaded, out)
+    from .design import design as rank
+    from .design_report import design_text, write_design
+    from .identification import identify, prepare
+
+    analysis = prepare(loaded)
+    _say("identifying the parameters at which the candidates are compared")
+    res = identify(analysis)
+    if res.fit.status != "converged" or not res.fit.moved:
+        raise GeobackError(f"the identification did not converge ({res.status}): candidates are compared at the "
+                           "estimate; run `geoback run` and fix the case first")
+    d = rank(analysis, res, progress=_say)
+    write_design(d, folder, loaded.case.name, plots=plots)
+    typer.echo(design_text(d, loaded.case.name))
+    typer.echo(f"best: {d.best} ({100 * d.reduction[d.ranking[0]]:.0f} % narrower) -> {folder}/design.md")
 
 
 @app.command()

@@ -25,7 +25,7 @@ from .simulation import Field
 GRID = 40  # grid points per axis when one factorisation serves the whole grid
 GRID_MIN = 9
 LINE_POINTS = 160  # model values along a linewise instrument
-WHAT = ("slice", "other", "field", "profiles")
+WHAT = ("slice", "other", "field", "profiles", "lining")
 
 
 @dataclass(frozen=True)
@@ -56,6 +56,8 @@ class Profile:
     line_reading: np.ndarray | None  # (k,) what the instrument would read there (relative to its
     # reference end for a relative instrument), without integration constants
     station_displacement: np.ndarray  # (npts, 2) at the stations
+    stage_readings: dict = _field(default_factory=dict)  # stage -> line_reading after that stage, for an
+    # instrument read at several construction stages (the attributes above are at the last of them)
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,7 @@ class Exploration:
     slice: ObjectiveSlice | None = None
     field: Field | None = None
     profiles: dict = _field(default_factory=dict)
+    lining: object | None = None  # lining.LiningForces at the estimate (models with a lining)
     counts: dict = _field(default_factory=dict)
     seconds: float = 0.0
 
@@ -159,12 +162,18 @@ def objective_slice(misfit: Misfit, result: Identification, paths: list[Fit], bu
 
 
 def profiles(sim, values: dict) -> dict[str, Profile]:
-    """The model along every instrument and at its stations (for the instrument and field figures)."""
+    """The model along every instrument and at its stations after the last construction stage (for
+    the instrument and field figures), and along the line after each stage an instrument was read at."""
     out = {}
+    read_at: dict[str, list[str]] = {}
+    for block in sim.survey.blocks:
+        read_at.setdefault(block.name, []).append(block.stage)
+    final = sim.stages[-1]
     for block in sim.survey.blocks:
         if block.name in out:  # the same instrument read at another stage
             continue
         line = along = disp = reading = None
+        by_stage = {}
         stations = block.stations
         if block.integration is not None:
             s = np.cumsum(block.lengths)
@@ -174,13 +183,19 @@ def profiles(sim, values: dict) -> dict[str, Profile]:
             along = np.linspace(0.0, s[-1], LINE_POINTS)
             line = start[None] + along[:, None] * d[None]
             direction = block.weights[0, 0]
+
+            def at(stage):
+                u = sim.stage_displacements_at(values, np.vstack([line, start]), stage)
+                ref, u = u[-1], u[:-1]
+                return u, ((u - ref) @ direction if block.relative else u @ direction)
+
             try:
-                disp = sim.displacements_at(values, np.vstack([line, start]))
-                ref, disp = disp[-1], disp[:-1]
-                reading = (disp - ref) @ direction if block.relative else disp @ direction
+                disp, reading = at(final)
+                if len(read_at[block.name]) > 1:
+                    by_stage = {stage: at(stage)[1] for stage in read_at[block.name]}
             except ValueError:
                 line = along = disp = reading = None
-        out[block.name] = Profile(along, line, disp, reading, sim.displacements_at(values, stations))
+        out[block.name] = Profile(along, line, disp, reading, sim.displacements_at(values, stations), by_stage)
     return out
 
 
@@ -190,8 +205,9 @@ def explore(misfit: Misfit, result: Identification, what=WHAT, settings: Setting
 
     misfit: the one the result was fitted with; what: any of 'slice' (objective slice), 'other'
     (the other method's fit, with `settings`), 'field' (the field at the estimate) and 'profiles'
-    (the model along the instruments); budget: seconds the slice may take when every grid point
-    refactorises (default: the fit's own time, at least 1 s)."""
+    (the model along the instruments), 'lining' (thrust and moments around a lining, if the model has
+    one); budget: seconds the slice may take when every grid point refactorises (default: the fit's
+    own time, at least 1 s)."""
     unknown = set(what) - set(WHAT)
     if unknown:
         raise ValueError(f"unknown exploration(s): {', '.join(sorted(unknown))} (known: {', '.join(WHAT)})")
@@ -218,4 +234,5 @@ def explore(misfit: Misfit, result: Identification, what=WHAT, settings: Setting
     values = misfit.values(result.fit.p)
     fld = sim.field(values) if "field" in what else None
     prof = profiles(sim, values) if "profiles" in what else {}
-    return Exploration(other, note, slc, fld, prof, sim.counters.since(before), time.perf_counter() - t0)
+    lining = sim.lining_forces(values) if "lining" in what else None
+    return Exploration(other, note, slc, fld, prof, lining, sim.counters.since(before), time.perf_counter() - t0)

@@ -11,27 +11,24 @@ a per-element coefficient array, K for new parameters is formed without re-assem
 dK/dp = sum_e dD_e/dp K_e is exact (eqn 36). The excavation load is the release of the
 initial stress on the tunnel wall, f = -int_S N^t sigma0 n dS (eqn 33, n outward of the
 ground), linear in sigma_v and in K0*sigma_v at the wall's quadrature points (eqns 39-40).
-Shape functions and quadrature rules come from scikit-fem.
+Shape functions and quadrature rules are in ``shapes.py``.
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from skfem import ElementLineP1, ElementLineP2, ElementTriP1, ElementTriP2
-from skfem.quadrature import get_quadrature
-from skfem.refdom import RefLine, RefTri
+from .shapes import Element, line_rule, triangle_rule
 
 from .mesh import Mesh
 
 
-def _ref_basis(element, X: np.ndarray):
+def _ref_basis(element: Element, X: np.ndarray):
     """Values (nb, nq) and reference gradients (nb, 2|1, nq) of an element's shape functions."""
-    vals, grads = zip(*(element.lbasis(X, i) for i in range(element.doflocs.shape[0])))
-    return np.array(vals), np.array(grads)
+    return element.basis(X)
 
 
-def _tri_element(order: int):
-    return ElementTriP2() if order == 2 else ElementTriP1()
+def _tri_element(order: int) -> Element:
+    return Element("triangle", order)
 
 
 def _geometry(coords: np.ndarray, dN: np.ndarray):
@@ -61,7 +58,7 @@ class FEModel:
         self.centre, self.radius = np.asarray(tunnel_centre, float), radius
         self.element = _tri_element(self.order)
         nb = self.tri.shape[1]
-        self._X, self._W = get_quadrature(RefTri, 2 * self.order)
+        self._X, self._W = triangle_rule(2 * self.order)
         _, self._dN = _ref_basis(self.element, self._X)
 
         # boundary conditions: symmetry axis and far side ux = 0, bottom fixed
@@ -86,13 +83,18 @@ class FEModel:
         self.edofs = edofs
         redofs = free_index[edofs]
 
-        # upper-triangle entries of the reduced global matrix contributed by each element
-        a, b = np.meshgrid(np.arange(2 * nb), np.arange(2 * nb), indexing="ij")
-        ra, rb = redofs[:, a.ravel()], redofs[:, b.ravel()]
-        keep = (ra >= 0) & (rb >= 0) & (ra <= rb)
+        # upper-triangle entries of the reduced global matrix contributed by each element: the local
+        # pairs i <= j (the component matrices are symmetric), placed at (min, max) of their global dofs
+        iu, ju = np.triu_indices(2 * nb)
+        ra, rb = redofs[:, iu], redofs[:, ju]
+        lo, hi = np.minimum(ra, rb), np.maximum(ra, rb)
+        del ra, rb
+        keep = lo >= 0  # both dofs free (hi >= lo)
         self._entry_elem = np.repeat(np.arange(self.ne, dtype=np.int32), keep.sum(axis=1))
-        keys = ra[keep] * self.nfree + rb[keep]
+        keys = lo[keep] * self.nfree + hi[keep]
+        del lo, hi
         uniq, slots = np.unique(keys, return_inverse=True)
+        del keys
         self._slots = slots.astype(np.int64)
         rows = uniq // self.nfree
         self._indices = (uniq % self.nfree).astype(np.int32)
@@ -102,12 +104,13 @@ class FEModel:
         # component matrices per element, kept only at the entries used above
         self._values = np.empty((4, len(self._slots)))
         pos = 0
+        sources = self._pair_sources(iu, ju)
         for start in range(0, self.ne, chunk):
             sl = slice(start, min(start + chunk, self.ne))
-            local = self._local_components(sl)  # (4, n, 2nb, 2nb)
+            local = self._local_components(sl, sources)  # (4, n, pairs)
             k = keep[sl]
             n_here = int(k.sum())
-            self._values[:, pos:pos + n_here] = local.reshape(4, local.shape[1], -1)[:, k]
+            self._values[:, pos:pos + n_here] = local[:, k]
             pos += n_here
 
         coords = self.nodes[self.tri]
@@ -133,16 +136,51 @@ class FEModel:
         w = np.abs(det) * self._W
         return exx, eyy, gxy, w
 
-    def _local_components(self, sl: slice) -> np.ndarray:
-        exx, eyy, gxy, w = self._strain_operators(sl)
-        w = w[:, None, :]
-        out = np.empty((4,) + exx.shape[:2] + (exx.shape[1],))
-        out[0] = (exx * w) @ exx.transpose(0, 2, 1)  # batched matmul: ~8x faster than einsum here
-        out[1] = (eyy * w) @ eyy.transpose(0, 2, 1)
-        k12 = (exx * w) @ eyy.transpose(0, 2, 1)
-        out[2] = k12 + k12.transpose(0, 2, 1)
-        out[3] = (gxy * w) @ gxy.transpose(0, 2, 1)
+    def _nodal_products(self, sl: slice) -> np.ndarray:
+        """M_xx, M_yy, M_xy, M_yx per element (n, 4 * nb * nb, flattened), M_xy[a, b] = int N_a,x N_b,y."""
+        coords = self.nodes[self.tri[sl]]
+        inv, det = _geometry(coords, self._dN)
+        dNdx = np.einsum("nrq,eqrx->enxq", self._dN, inv)  # (n, nb, 2, nq)
+        w = (np.abs(det) * self._W)[:, None, :]
+        gx, gy = dNdx[:, :, 0], dNdx[:, :, 1]
+        Mxx = (gx * w) @ gx.transpose(0, 2, 1)
+        Myy = (gy * w) @ gy.transpose(0, 2, 1)
+        Mxy = (gx * w) @ gy.transpose(0, 2, 1)
+        n = len(gx)
+        out = np.empty((n, 4) + Mxx.shape[1:])
+        out[:, 0], out[:, 1], out[:, 2], out[:, 3] = Mxx, Myy, Mxy, Mxy.transpose(0, 2, 1)
+        return out.reshape(n, -1)
+
+    def _pair_sources(self, iu: np.ndarray, ju: np.ndarray) -> np.ndarray:
+        """For each component (K11, K22, K12 + K12^t, K33) and local dof pair (i, j), the column of
+        _nodal_products it equals, or the last (a zero) where the component has no entry. With dof
+        2a = a_x, 2a + 1 = a_y: K11[a_x, b_x] = M_xx; K22[a_y, b_y] = M_yy; (K12 + K12^t)[a_x, b_y] =
+        M_xy[a, b] and [a_y, b_x] = M_yx[a, b]; K33[a_x, b_x] = M_yy, [a_y, b_y] = M_xx,
+        [a_x, b_y] = M_yx, [a_y, b_x] = M_xy (eqn 36's strain operators written node by node)."""
+        nb = self.tri.shape[1]
+        a, ca, b, cb = iu // 2, iu % 2, ju // 2, ju % 2
+        XX, YY, XY, YX = 0, 1, 2, 3
+        zero = 4 * nb * nb
+        table = {0: {(0, 0): XX}, 1: {(1, 1): YY}, 2: {(0, 1): XY, (1, 0): YX},
+                 3: {(0, 0): YY, (1, 1): XX, (0, 1): YX, (1, 0): XY}}
+        out = np.full((4, len(iu)), zero, np.int64)
+        for c, where in table.items():
+            for (u, v), src in where.items():
+                sel = (ca == u) & (cb == v)
+                out[c, sel] = src * nb * nb + a[sel] * nb + b[sel]
         return out
+
+    def _local_components(self, sl: slice, sources: np.ndarray | None = None) -> np.ndarray:
+        """The four component matrices (4, n, 2nb, 2nb), or with `sources` only their entries at the
+        pairs `sources` gives (4, n, pairs)."""
+        nb = self.tri.shape[1]
+        if sources is None:
+            iu, ju = np.meshgrid(np.arange(2 * nb), np.arange(2 * nb), indexing="ij")
+            full = self._local_components(sl, self._pair_sources(iu.ravel(), ju.ravel()))
+            return full.reshape(4, -1, 2 * nb, 2 * nb)
+        M = self._nodal_products(sl)
+        M = np.concatenate([M, np.zeros((len(M), 1))], axis=1)
+        return np.stack([M[:, sources[c]] for c in range(4)])
 
     def matrix(self, coeffs: np.ndarray) -> sp.csr_matrix:
         """Upper triangle of sum_e sum_c coeffs[e, c] K_c,e on the free dofs (coeffs: (ne, 4))."""
@@ -165,8 +203,8 @@ class FEModel:
     def _build_wall(self):
         """Quadrature on the excavated boundary: points, weights, normals, shape values."""
         edges = self.mesh.tunnel_edges
-        line = ElementLineP2() if self.order == 2 else ElementLineP1()
-        X, W = get_quadrature(RefLine, 2 * self.order + 2)
+        line = Element("line", self.order)
+        X, W = line_rule(2 * self.order + 2)
         N, dN = _ref_basis(line, X)  # (nb, nq), (nb, 1, nq)
         coords = self.nodes[edges]  # (nf, nb, 2)
         xq = np.einsum("fnx,nq->fqx", coords, N)

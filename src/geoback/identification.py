@@ -26,6 +26,7 @@ from .caveats import fit_caveats, status_words
 from .reliability import Reliability, assess
 from .scales import groups_of
 from .simulation import Prediction, Simulation, is_constant, make_simulation
+from .replicates import Replicates, identify_replicates  # noqa: F401 (part of this module's API)
 
 
 @dataclass(frozen=True)
@@ -171,6 +172,10 @@ class Identification:
     profiled: dict = field(default_factory=dict)  # name -> (low, high, low open, high open): profile-
     # likelihood 95 % intervals; an open end is a limit (bound or allowed range) the readings do not move away from
     caveats: tuple = ()  # what not to trust, in words and codes (geoback.caveats)
+    mesh_error: object = None  # geoback.mesh_error.MeshError, if checked
+    mesh_error_included: bool = False  # its variance added to C_x before the final fit
+    forecasts: object = None  # geoback.forecast.Forecasts at the estimate, if the case asks for any
+    prior_posterior: object = None  # geoback.identifiability.PriorPosterior: what the readings add to a prior
 
     @property
     def status(self) -> str:
@@ -221,12 +226,15 @@ class Identification:
 
 
 def identify(case, method: str | None = None, progress=None, weighting: str | None = None,
-             p0: np.ndarray | None = None, profile: str = "auto", require_dof: bool = True) -> Identification:
+             p0: np.ndarray | None = None, profile: str = "auto", require_dof: bool = True,
+             mesh_error: str | None = "ignore") -> Identification:
     """Identify the case's parameters and assess the estimate (no files written).
 
     case: a LoadedCase (prepared here) or an Analysis (its simulation and factorisations reused);
     profile: 'auto' (profile-likelihood intervals where the linearised ones are unreliable), 'all'
-    or 'none'; require_dof: refuse a case with no more readings (and priors) than parameters."""
+    or 'none'; require_dof: refuse a case with no more readings (and priors) than parameters;
+    mesh_error: 'check' or 'include' the discretisation error of the readings (geoback.mesh_error;
+    one more forward run on a finer mesh), 'ignore' it, or None for the case's fit.mesh_error."""
     t0 = time.perf_counter()
     analysis = case if isinstance(case, Analysis) else prepare(case)
     t1 = time.perf_counter()
@@ -248,12 +256,31 @@ def identify(case, method: str | None = None, progress=None, weighting: str | No
     sim = analysis.simulation
     before = sim.counters.snapshot()
     result = fit(misfit, analysis.settings, method=method, p0=p0, progress=progress)
+    mode = analysis.case.fit.mesh_error if mesh_error is None else mesh_error
+    merr, notices = None, analysis.notices
+    if mode != "ignore" and result.moved:
+        from .caveats import Caveat
+        from .mesh_error import WARN, discretisation_error
+
+        merr = discretisation_error(analysis, misfit, result.p)
+        if mode == "include" and not merr.skipped:  # the mesh's error as an independent error of each reading
+            data = misfit.data
+            widened = Data(data.blocks, data.measured, data.covariance + np.diag(merr.difference ** 2), data.labels)
+            misfit = Misfit(misfit.simulation, widened, misfit.parameters, misfit.base_values, misfit.weighting,
+                            misfit.scales)
+            result = fit(misfit, analysis.settings, method=method, p0=result.p, progress=progress)
+        elif merr.max_sigma > WARN:
+            notices = tuple(notices) + (Caveat(
+                "mesh-error", merr.text() + f": above {WARN:g} sigma, the mesh may bias the estimate; refine the "
+                "mesh near the instruments (mesh.size_tunnel, mesh.size_instruments) or add the error to C_x "
+                "with fit: {mesh_error: include}"),)
     counts = sim.counters.since(before)
     t2 = time.perf_counter()
     out = conclude(misfit, result, analysis.case, analysis.loaded.digest(), counts,
-                   dict(sim.timings, setup=t1 - t0, fit=t2 - t1), analysis.settings, profile, analysis.notices)
+                   dict(sim.timings, setup=t1 - t0, fit=t2 - t1), analysis.settings, profile, notices)
     out.seconds["assess"] = time.perf_counter() - t2
-    return out
+    return replace(out, mesh_error=merr, mesh_error_included=mode == "include" and merr is not None
+                   and not merr.skipped)
 
 
 def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, seconds: dict,
@@ -272,11 +299,14 @@ def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, se
     if settings is not None and profile != "none" and result.status == "converged" and result.moved:
         profiled = _profiles(misfit, settings, result, rel, limits, profile == "all")
     caveats = tuple(notices) + tuple(fit_caveats(result, rel, misfit.parameters, limits, profiled))
+    from .identifiability import prior_posterior
+
     return Identification(
         case, case_hash, misfit.parameters, result, rel, misfit.data, misfit.weighting,
         {k: counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}, dict(seconds),
         getattr(sim, "dofs", 0), len(getattr(sim.mesh, "triangles", ())), getattr(sim, "solver", None),
-        standardised, profiled, caveats)
+        standardised, profiled, caveats,
+        prior_posterior=prior_posterior(rel.information, misfit.parameters, result.p, limits))
 
 
 def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability, limits, every: bool) -> dict:
@@ -317,82 +347,3 @@ def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability,
                                     bool(params.log[i]) or (lim is not None and lim.lo > 0))
             out[name] = (a, b, a == lo, b == hi)  # an end at a limit: the readings do not bound it there
     return out
-
-
-@dataclass(frozen=True)
-class Replicates:
-    """Estimates of many identifications of one case on other readings (Monte Carlo studies)."""
-
-    p: np.ndarray  # (N, n)
-    std: np.ndarray  # (N, n) linearised standard deviations at each estimate
-    covariance: np.ndarray  # (N, n, n)
-    J: np.ndarray  # (N,)
-    converged: np.ndarray  # (N,) bool
-    at_bound: np.ndarray  # (N, n) bool
-    names: list[str]
-    # estimated error scales (None when every scale is known): k per group and its interval,
-    # and the denominator dof of each replicate's parameter ellipse (Reliability.ellipse_limit)
-    scale_names: list[str] | None = None
-    scales: np.ndarray | None = None  # (N, G)
-    scale_low: np.ndarray | None = None
-    scale_high: np.ndarray | None = None
-    ellipse_dof: np.ndarray | None = None  # (N,)
-    ellipse_limit: np.ndarray | None = None  # (N,) 95 % limit of d^2
-    scale_dof: np.ndarray | None = None  # (N, G) restricted dof c_g = m_g - h_g of each estimated scale
-
-    def inside(self, truth: np.ndarray, level: float = 0.95) -> np.ndarray:
-        """Is `truth` inside each replicate's `level` ellipse (F ellipse when scales are estimated)?"""
-        from scipy import special
-
-        from .scales import chi2_ppf
-
-        e = self.p - np.asarray(truth, float)
-        d2 = np.einsum("ki,ki->k", e, np.linalg.solve(self.covariance, e[..., None])[..., 0])
-        n = self.p.shape[1]
-        if self.ellipse_dof is None:
-            return d2 < chi2_ppf(level, n)
-        finite = np.isfinite(self.ellipse_dof)
-        limit = np.where(finite, n * special.fdtri(n, np.where(finite, self.ellipse_dof, 1.0), level),
-                         chi2_ppf(level, n))
-        return d2 < limit
-
-
-def identify_replicates(analysis: Analysis, measured: np.ndarray, method: str | None = None,
-                        p0: np.ndarray | None = None) -> Replicates:
-    """Identify the case's parameters from each row of `measured` (N x m readings), reusing one
-    simulation (one factorisation when K = E k) and one misfit; for calibration studies."""
-    from threadpoolctl import threadpool_limits
-
-    measured = np.atleast_2d(np.asarray(measured, float))
-    base = analysis.misfit
-    n = base.n
-    N = len(measured)
-    P, S, C, J = np.empty((N, n)), np.empty((N, n)), np.empty((N, n, n)), np.empty(N)
-    ok, bound = np.zeros(N, bool), np.zeros((N, n), bool)
-    est = [k for k, g in enumerate(base.scales) if g.estimated]
-    K, lo, hi, dof = (np.full((N, len(est)), np.nan) for _ in range(4))
-    edof, elim = np.full(N, np.inf), np.full(N, np.nan)
-    # thousands of tiny dense solves: BLAS threads only add start-up cost (and spin on a busy machine)
-    with threadpool_limits(limits=1, user_api="blas"):
-        for i, x in enumerate(measured):
-            mis = base.with_measured(x)
-            f = fit(mis, analysis.settings, method=method, p0=p0)
-            if est:  # the scales estimated at this replicate's optimum, C_p with them, the F ellipse
-                mis = mis.anchored(f.p)
-                rel = assess(mis.evaluate(f.p, jacobian=True), mis.parameters, mis.logdet)
-                K[i] = [rel.error_scales[k].factor for k in est]
-                lo[i] = [rel.error_scales[k].low for k in est]
-                hi[i] = [rel.error_scales[k].high for k in est]
-                dof[i] = [rel.error_scales[k].dof for k in est]
-                edof[i], elim[i] = rel.ellipse_dof, rel.ellipse_limit(0.95)
-            Bw = mis.evaluate(f.p, jacobian=True).B
-            try:
-                cov = np.linalg.inv(Bw.T @ Bw)  # C_p = (A'^t A' + C_p0^-1)^-1, eqn 55
-            except np.linalg.LinAlgError:
-                cov = np.full((n, n), np.inf)
-            P[i], C[i], S[i], J[i] = f.p, cov, np.sqrt(np.clip(np.diag(cov), 0, None)), f.J
-            ok[i], bound[i] = f.status == "converged", f.at_bound
-    if not est:
-        return Replicates(P, S, C, J, ok, bound, list(base.parameters.names))
-    return Replicates(P, S, C, J, ok, bound, list(base.parameters.names), [base.scales[k].name for k in est],
-                      K, lo, hi, edof, elim, dof)

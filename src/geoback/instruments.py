@@ -214,13 +214,15 @@ class Survey:
     the inclinometers' systematic errors (``ERROR_STEMS``): x += E b for the bias shifts b, and the
     depth offsets, with which P is read at shifted points (``operator``).
 
-    P has the m reading rows first and then the rows D of the depth derivatives dx/dz of every
-    inclinometer's readings (``depth_rows``): a physics computes ``operator(values) @ u`` and
+    P holds the m reading rows; ``operator(values)`` stacks below them the rows D of the depth
+    derivatives dx/dz of every inclinometer's readings (``depth_rows``): a physics that reads depth
+    offsets (``Simulation.reads_depth_offsets``) computes ``operator(values) @ u`` and
     ``operator(values) @ du/dv`` and `Simulation.predict` splits them, so a depth offset costs no
-    solve and its sensitivity D u is exact."""
+    solve and its sensitivity D u is exact. An inclinometer read at several construction stages
+    has one bias shift over all its surveys and no depth offset."""
 
     blocks: list[InstrumentBlock]
-    P: sp.csr_matrix  # (m + depth rows) x nfree, at zero depth offsets
+    P: sp.csr_matrix  # m x nfree, at zero depth offsets
     G: np.ndarray  # m x k
     constant_names: list[str]
     labels: list[Reading]
@@ -228,6 +230,7 @@ class Survey:
     bias_columns: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # m x (number of bias names)
     depth_rows: dict = field(default_factory=dict)  # zoff[I1] -> (its reading rows, its rows of P beyond m)
     fe: object = None  # what P interpolates on (``interpolation(points, derivative)``), to read elsewhere
+    D: sp.csr_matrix | None = None  # the depth-derivative rows (``depth_rows``), at zero depth offsets
     _shifted: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -239,18 +242,20 @@ class Survey:
         return tuple(sorted((n, float(np.real(values[n]))) for n in self.depth_rows if values.get(n, 0) != 0))
 
     def operator(self, values) -> sp.csr_matrix:
-        """P with every inclinometer read at its depth offset in `values` (P itself without one):
-        the instruments' sampling points moved zoff deeper, interpolated anew (a few remembered)."""
+        """[P; D] with every inclinometer read at its depth offset in `values`: the instruments'
+        sampling points moved zoff deeper, interpolated anew (a few remembered)."""
         key = self.offsets(values)
-        if not key:
-            return self.P
         if key not in self._shifted:
-            shift = dict(key)
-            blocks = [replace(b, points=b.points - np.array([0.0, shift.get(f"zoff[{b.name}]", 0.0)]))
-                      for b in self.blocks]
-            if len(self._shifted) >= 8:
-                self._shifted.pop(next(iter(self._shifted)))
-            self._shifted[key] = _operator(blocks, self.fe)[0]
+            if not key:
+                full = self.P if self.D is None or self.D.shape[0] == 0 else sp.vstack([self.P, self.D]).tocsr()
+            else:
+                shift = dict(key)
+                blocks = [replace(b, points=b.points - np.array([0.0, shift.get(f"zoff[{b.name}]", 0.0)]))
+                          for b in self.blocks]
+                if len(self._shifted) >= 8:
+                    self._shifted.pop(next(k for k in self._shifted if k))
+                full = _operator(blocks, self.fe)[0]
+            self._shifted[key] = full
         return self._shifted[key]
 
     def rows(self, name: str) -> slice:
@@ -277,6 +282,21 @@ def bias_shift_column(block: InstrumentBlock) -> np.ndarray:
     return block.integration @ np.ones(len(block.lengths))
 
 
+def stage_constants(blocks: list[InstrumentBlock]) -> list[InstrumentBlock]:
+    """An instrument read at several construction stages has integration constants per survey (each
+    survey's reference end has its own error or movement): A[X1] becomes A[X1.stage] on each."""
+    count: dict[str, int] = {}
+    for b in blocks:
+        for n in b.constant_names:
+            count[n] = count.get(n, 0) + 1
+    out = []
+    for b in blocks:
+        if any(count[n] > 1 for n in b.constant_names):
+            b = replace(b, constant_names=[f"{n[:-1]}.{b.stage}]" if count[n] > 1 else n for n in b.constant_names])
+        out.append(b)
+    return out
+
+
 def _operator(blocks: list[InstrumentBlock], fe) -> tuple[sp.csr_matrix, dict]:
     """[P; D]: the readings' interpolation and, below it, the depth derivative of every
     inclinometer's readings (read zoff deeper: d/d zoff u(x, y - zoff) = -du/dy); and where D's
@@ -287,13 +307,14 @@ def _operator(blocks: list[InstrumentBlock], fe) -> tuple[sp.csr_matrix, dict]:
     Dx, Dy = fe.interpolation(all_pts, derivative=1) if incl else (None, None)  # d u / d y
     rows, extra, depth_rows = [], [], {}
     m = sum(b.m for b in blocks)
+    surveys = _survey_count(blocks)
     offset = r0 = 0
     for b in blocks:
         n = len(b.points)
         wx = sp.csr_matrix(b.weights[:, :, 0])
         wy = sp.csr_matrix(b.weights[:, :, 1])
         rows.append(wx @ Ix[offset:offset + n] + wy @ Iy[offset:offset + n])
-        if b.kind == "inclinometer":
+        if b.kind == "inclinometer" and surveys[b.name] == 1:
             start = m + sum(r.shape[0] for r in extra)
             extra.append(-(wx @ Dx[offset:offset + n] + wy @ Dy[offset:offset + n]))
             depth_rows[f"zoff[{b.name}]"] = (slice(r0, r0 + b.m), slice(start, start + b.m))
@@ -302,20 +323,31 @@ def _operator(blocks: list[InstrumentBlock], fe) -> tuple[sp.csr_matrix, dict]:
     return sp.vstack(rows + extra).tocsr(), depth_rows
 
 
+def _survey_count(blocks: list[InstrumentBlock]) -> dict[str, int]:
+    """How many surveys (construction stages) of each instrument `blocks` hold."""
+    count: dict[str, int] = {}
+    for b in blocks:
+        count[b.name] = count.get(b.name, 0) + 1
+    return count
+
+
 def build_survey(blocks: list[InstrumentBlock], fe) -> Survey:
     """The observation operator of `blocks` on the FE model `fe` (shape-function interpolation),
     with the depth-derivative rows and bias columns of every inclinometer (``Survey``)."""
-    P, depth_rows = _operator(blocks, fe)
+    blocks = stage_constants(blocks)
+    full, depth_rows = _operator(blocks, fe)
     Gs, names, labels = [], [], []
-    error_names, bias_cols = [], []
+    error_names, bias_cols = [], {}
+    surveys = _survey_count(blocks)
     m = sum(b.m for b in blocks)
     r0 = 0
     for b in blocks:
         if b.kind == "inclinometer":
-            col = np.zeros(m)
-            col[r0:r0 + b.m] = bias_shift_column(b)
-            bias_cols.append(col)
-            error_names += [f"bias[{b.name}]", f"zoff[{b.name}]"]
+            bias = f"bias[{b.name}]"
+            if bias not in bias_cols:
+                bias_cols[bias] = np.zeros(m)
+                error_names += [bias] + ([f"zoff[{b.name}]"] if surveys[b.name] == 1 else [])
+            bias_cols[bias][r0:r0 + b.m] = bias_shift_column(b)
         r0 += b.m
         Gs.append(b.constants)
         names += b.constant_names
@@ -325,5 +357,5 @@ def build_survey(blocks: list[InstrumentBlock], fe) -> Survey:
     for g in Gs:
         G[r0:r0 + g.shape[0], c0:c0 + g.shape[1]] = g
         r0, c0 = r0 + g.shape[0], c0 + g.shape[1]
-    E = np.column_stack(bias_cols) if bias_cols else np.zeros((m, 0))
-    return Survey(blocks, P, G, names, labels, error_names, E, depth_rows, fe)
+    E = np.column_stack(list(bias_cols.values())) if bias_cols else np.zeros((m, 0))
+    return Survey(blocks, full[:m], G, names, labels, error_names, E, depth_rows, fe, full[m:])

@@ -101,16 +101,17 @@ def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = No
     names, init, lo, hi, log, pm, ps, units = [], [], [], [], [], [], [], []
     notices = []
     constants = set(simulation.survey.constant_names)
+    canonical = []
     for i, p in enumerate(specs):
         if is_constant(p.name):
             if p.name not in constants:
                 raise error(i, f"'{p.name}': no linewise instrument has this integration constant")
-            name, unit = p.name, UNITS[p.name[0]]
+            name = p.name
         elif is_instrument_error(p.name):
             if p.name not in simulation.survey.error_names:
                 raise error(i, f"'{p.name}': no inclinometer has this systematic error (known: "
                                f"{', '.join(simulation.survey.error_names) or 'none'})")
-            name, unit = p.name, UNITS[p.name.split("[")[0]]
+            name = p.name
         else:
             name = simulation.canonical(p.name)
             if name is None:
@@ -121,11 +122,17 @@ def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = No
                     raise error(i, f"'{p.name}' has no value in the case to start from"
                                    + (" (give this layer a K0 in ground.layers)" if name.startswith("K0") else ""))
                 base[name] = null
-            unit = simulation.unit(name)
-        if name in names:
-            raise error(i, f"'{p.name}' is the same parameter as '{specs[names.index(name)].name}': "
+        if name in canonical:
+            raise error(i, f"'{p.name}' is the same parameter as '{specs[canonical.index(name)].name}': "
                            "list each parameter once")
-        lim = parameter_limits(simulation, name, base)
+        canonical.append(name)
+    # ranges that depend on other quantities (n's limit on nu) are those at the initial values
+    start = {**base, **{name: p.initial for name, p in zip(canonical, specs)
+                         if not (is_constant(name) or is_instrument_error(name))}}
+    for i, (p, name) in enumerate(zip(specs, canonical)):
+        unit = (UNITS[name.split("[")[0]] if is_constant(name) or is_instrument_error(name)
+                else simulation.unit(name))
+        lim = parameter_limits(simulation, name, start)
         span = f"{lim.lo:g} to {lim.hi:g}" + (f" {unit}" if unit not in ("-", "") else "")
         if not lim.contains(p.initial):
             raise error(i, f"expected an initial value of {name} within its allowed range ({span}), found "

@@ -16,10 +16,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import math
 
 import numpy as np
 
+from . import chi2
+from . import scale_estimates as se
 from . import scales as sc
 
 Z95 = 1.959963984540054  # standard normal quantile at 0.975
@@ -53,6 +54,7 @@ class Reliability:
     stated_residual: np.ndarray | None = None  # L^-1 (x* - x) with the stated C_x
     stated_J: float = float("nan")  # J with every scale at 1 (data and priors)
     log: np.ndarray | None = None  # parameters identified as ln p: their intervals are made in log space
+    information: np.ndarray | None = None  # A'^t A' of the readings alone (no prior rows), physical units
 
     @property
     def reduced_chi2(self) -> float:
@@ -88,50 +90,12 @@ class Reliability:
             from scipy import special
 
             return float(n * special.fdtri(n, self.ellipse_dof, level))
-        return sc.chi2_ppf(level, n)
+        return se.chi2_ppf(level, n)
 
 
 def chi2_sf(x: float, dof: float) -> float:
-    """P(chi^2_dof > x) = Q(dof/2, x/2), the regularised upper incomplete gamma function.
-
-    Series for x < a + 1, Lentz's continued fraction otherwise (Numerical Recipes, 6.2), to
-    ~1e-14 relative; written here because scipy.special costs a fifth of a second at start-up.
-    Checked against scipy.special.gammaincc in the tests."""
-    if dof <= 0:
-        return float("nan")
-    a, x = dof / 2.0, max(float(x), 0.0) / 2.0
-    if x == 0:
-        return 1.0
-    if not math.isfinite(x):
-        return 0.0
-    log_front = -x + a * math.log(x) - math.lgamma(a)
-    if x < a + 1:  # P(a, x) by its series, Q = 1 - P
-        term = total = 1.0 / a
-        ap = a
-        for _ in range(10000):
-            ap += 1
-            term *= x / ap
-            total += term
-            if abs(term) < abs(total) * 1e-16:
-                break
-        return float(max(0.0, 1.0 - total * math.exp(log_front)))
-    tiny = 1e-300  # Q(a, x) by the continued fraction (modified Lentz)
-    b = x + 1 - a
-    c, d = 1 / tiny, 1 / b
-    h = d
-    for i in range(1, 10000):
-        an = -i * (i - a)
-        b += 2
-        d = an * d + b
-        d = tiny if abs(d) < tiny else d
-        c = b + an / c
-        c = tiny if abs(c) < tiny else c
-        d = 1 / d
-        delta = d * c
-        h *= delta
-        if abs(delta - 1) < 1e-16:
-            break
-    return float(math.exp(log_front) * h)
+    """P(chi^2_dof > x) (geoback.chi2: no scipy.special at start-up)."""
+    return chi2.sf(x, dof)
 
 
 def combination_text(names: list[str], v: np.ndarray) -> str:
@@ -185,11 +149,11 @@ def assess(ev, params, logdet: float) -> Reliability:
     if state is None:
         rel = Reliability(list(names), p, Cp, std, corr, s, Vt.T, cond, Q, leverage, rw.copy(), chi2, dof,
                           pval, float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined,
-                          log=np.asarray(params.log, bool))
+                          log=np.asarray(params.log, bool), information=Aw.T @ Aw)
         rel.total_dof, rel.stated_residual, rel.stated_J = dof, rel.whitened_residual, chi2
         if groups:  # what each instrument's readings say about its stated sigma
             known = sc.profile_state(groups, rw, np.zeros(len(groups)))
-            rel.error_scales = sc.group_estimates(known, sc_leverage(groups, leverage))
+            rel.error_scales = se.group_estimates(known, sc_leverage(groups, leverage))
         return rel
     return _assess_with_scales(ev, params, logdet, groups, state, names, p, Cp, std, corr, s, Vt.T, cond, Q,
                                leverage, aug, Cs, scale, tiny, undetermined, dof)
@@ -205,7 +169,7 @@ def _assess_with_scales(ev, params, logdet, groups, state, names, p, Cp, std, co
     m, n = ev.m, len(p)
     rw = ev.whitened_residual
     h = sc_leverage(groups, leverage)
-    estimates = sc.group_estimates(state, h)
+    estimates = se.group_estimates(state, h)
     # chi^2 of the readings whose sigma is known, and of the priors, on Satterthwaite's dof:
     # sum r_i^2 over rows R ~ sum of lambda chi2(1), lambda the eigenvalues of (I - Q_full)_RR
     known_rows = np.concatenate([g.rows for g in groups if not g.estimated] or [np.zeros(0, int)]).astype(int)
@@ -226,15 +190,15 @@ def _assess_with_scales(ev, params, logdet, groups, state, names, p, Cp, std, co
     m2logL = ev.support + logdet + m * np.log(2 * np.pi)  # support includes m_g u_g and the scales' priors
     # the parameters' dof: Satterthwaite on the estimated scales' uncertainty (var u_g = 2 / nu_g)
     B = ev.whitened_sensitivity
-    infos = sc.group_information(groups, B)
+    infos = se.group_information(groups, B)
     nus = np.array([g.information(u, J) if g.estimated else np.inf for g, u, J in zip(groups, state.u, state.J)])
-    pdof = sc.satterthwaite_dof(Cp, infos, nus) if not tiny.any() else np.full(n, np.inf)
-    edof = sc.ellipse_dof(h, nus, n)
+    pdof = se.satterthwaite_dof(Cp, infos, nus) if not tiny.any() else np.full(n, np.inf)
+    edof = se.ellipse_dof(h, nus, n)
     stated = ev.stated_residual
     k = n + n_scales
     rel = Reliability(list(names), p, Cp, std, corr, s, V, cond, Q, leverage, rw.copy(), chi2, dof, pval,
                       float(m2logL), float(m2logL + 2 * k), float(m2logL + k * np.log(m)), undetermined,
                       estimates, pdof, edof, total_dof, stated, float(stated @ stated + prior_r @ prior_r),
-                      log=np.asarray(params.log, bool))
+                      log=np.asarray(params.log, bool), information=B.T @ B)
     return rel
 

@@ -11,11 +11,17 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .outputs import result_set, write_atomic, write_csv, write_json, write_matrix_csv
+from .outputs import write_atomic, write_csv, write_json, write_matrix_csv
+from .resultsets import result_set
 
 
-def reading_label(lab) -> str:
-    return f"{lab.instrument}:{lab.station}:{lab.component}"
+def reading_label(lab, staged: bool = False) -> str:
+    """instrument:station:component, and @stage when readings come from several construction stages."""
+    return f"{lab.instrument}:{lab.station}:{lab.component}" + (f"@{lab.stage}" if staged else "")
+
+
+def several_stages(labels) -> bool:
+    return len({lab.stage for lab in labels}) > 1
 
 
 def summary(res, exploration=None) -> dict:
@@ -36,9 +42,12 @@ def summary(res, exploration=None) -> dict:
                            "std": rel.std[i], "ci95": [lo[i], hi[i]],
                            "ci95_method": "profile likelihood" if n in res.profiled else "linearised",
                            "ci95_open": list(res.profiled[n][2:]) if n in res.profiled else [False, False],
-                           "at_bound": bool(f.at_bound[i])}
+                           "at_bound": bool(f.at_bound[i]),
+                           **(res.prior_posterior.as_dict(i) if res.prior_posterior is not None else {})}
                        for i, n in enumerate(params.names)},
         "warnings": [c.as_dict() for c in res.caveats],
+        "mesh_error": ({**res.mesh_error.as_dict(), "included_in_C_x": res.mesh_error_included}
+                       if res.mesh_error is not None else {"checked": False, "reason": "fit.mesh_error: ignore"}),
         "J": f.J, "chi2": rel.chi2, "dof": rel.dof, "reduced_chi2": rel.reduced_chi2, "p_value": rel.p_value,
         "minus_2_log_likelihood": rel.minus2logL, "aic": rel.aic, "bic": rel.bic,
         "condition_number": rel.condition, "undetermined": rel.undetermined,
@@ -53,6 +62,10 @@ def summary(res, exploration=None) -> dict:
             out["parameters"][n]["dof"] = rel.parameter_dof[i]
         out["ellipse_dof"] = rel.ellipse_dof
         out["ellipse_limit_95"] = rel.ellipse_limit(0.95)
+    if res.forecasts is not None:
+        from .forecast_report import as_dict
+
+        out["forecasts"] = as_dict(res.forecasts)
     if exploration is not None:  # the work of the field file and figures, apart from the identification's
         out["exploration"] = {k: exploration.counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}
         out["timings_s"]["exploration"] = round(exploration.seconds, 4)
@@ -88,6 +101,7 @@ def report_text(res) -> str:
                 f"≥ its bound {hi[i]:.6g}" if hi_open else f"{hi[i]:.6g}")
         lines.append(f"| {n} | {params.units[i]} | {params.initial[i]:.6g} | {f.p[i]:.6g}{bound} | "
                      f"{rel.std[i]:.3g}{_cv(f.p[i], rel.std[i])} | [{ends[0]}, {ends[1]}]{how} |")
+    lines += prior_posterior_lines(res)
     if rel.parameter_dof is not None:
         lines += ["", "The error scales are estimated: the intervals are Student t on "
                   + ", ".join(f"{n} {d:.3g}" for n, d in zip(params.names, rel.parameter_dof))
@@ -103,10 +117,36 @@ def report_text(res) -> str:
               if np.isfinite(rel.correlation[i, j]) and abs(rel.correlation[i, j]) > 0.5]
     if strong:
         lines += ["", "Correlations above 0.5: " + ", ".join(f"C({a}, {b}) = {c:+.3f}" for a, b, c in strong)]
+    if res.mesh_error is not None:
+        lines += ["", "Mesh: " + res.mesh_error.text() + (" - included in C_x for this fit"
+                                                           if res.mesh_error_included else "")]
     top = np.argsort(-rel.leverage)[:3]
     lines += ["", "Most informative readings (leverage = diag Q): " +
-              ", ".join(f"{reading_label(res.data.labels[i])} ({rel.leverage[i]:.2f})" for i in top)]
-    return "\n".join(lines) + "\n"
+              ", ".join(f"{reading_label(res.data.labels[i], several_stages(res.data.labels))} "
+                        f"({rel.leverage[i]:.2f})" for i in top)]
+    text = "\n".join(lines) + "\n"
+    if res.forecasts is not None:
+        from .forecast_report import report_section
+
+        text += report_section(res.forecasts)
+    return text
+
+
+def prior_posterior_lines(res) -> list[str]:
+    """Prior -> posterior std of each parameter and its identifiability (identifiability.py)."""
+    pp = res.prior_posterior
+    if pp is None:
+        return []
+    out = ["", "What the readings tell (prior → posterior std; identifiability 0: nothing beyond the prior, "
+               "1: fixed by the readings):", "",
+           "| parameter | prior std | prior | posterior std | reduction | identifiability |", "|---|---|---|---|---|---|"]
+    for i, n in enumerate(pp.names):
+        out.append(f"| {n} | {pp.prior_std[i]:.3g} | {pp.prior_source[i]} | {pp.posterior_std[i]:.3g} | "
+                   f"{100 * pp.reduction[i]:.0f} % | {pp.identifiability[i]:.2f} |")
+    if "usual range" in pp.prior_source:
+        out += ["", "(usual range: no prior in the case, so an uninformed one spanning the usual range for ground "
+                    "as its 95 % interval, in ln p for positive quantities.)"]
+    return out
 
 
 def chi2_line(rel) -> str:
@@ -144,12 +184,17 @@ def error_scale_lines(rel) -> list[str]:
 
 
 def write_field(field, path: Path) -> None:
-    """Displacement (point data) and cell data (stresses, ...) as VTU for ParaView."""
+    """Displacement (point data) and cell data (stresses, ...) as VTU for ParaView; more point data
+    (the displacement after every construction stage) if the field has it."""
     from .mesh import write_mesh
 
-    disp = field.displacement
-    write_mesh(field.mesh, path, point_data={"displacement": np.column_stack([disp, np.zeros(len(disp))])},
-               cell_data=field.cell_data)
+    def vec(v):
+        v = np.asarray(v)
+        return np.column_stack([v, np.zeros(len(v))]) if v.ndim == 2 and v.shape[1] == 2 else v
+
+    point = {"displacement": vec(field.displacement)}
+    point.update({k: vec(v) for k, v in getattr(field, "point_data", {}).items()})
+    write_mesh(field.mesh, path, point_data=point, cell_data=field.cell_data)
 
 
 def write_run(res, out: Path, exploration=None, plots: bool = False) -> None:
@@ -164,16 +209,21 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
     names = params.names
     out = Path(out)
     lo, hi = res.intervals95()
+    pp = res.prior_posterior
     write_csv(out / "parameters.csv",
-              ["name", "unit", "initial", "estimate", "std", "ci95_low", "ci95_high", "ci95_method", "at_bound"],
+              ["name", "unit", "initial", "estimate", "std", "ci95_low", "ci95_high", "ci95_method", "at_bound",
+               "prior_std", "prior_source", "posterior_std", "identifiability"],
               [[n, params.units[i], params.initial[i], f.p[i], rel.std[i], lo[i], hi[i],
                 "profile likelihood" if n in res.profiled else "linearised", bool(f.at_bound[i])]
+               + ([pp.prior_std[i], pp.prior_source[i], pp.posterior_std[i], pp.identifiability[i]] if pp is not None
+                  else ["", "", "", ""])
                for i, n in enumerate(names)])
     write_matrix_csv(out / "covariance.csv", names, rel.covariance)
     write_matrix_csv(out / "correlation.csv", names, rel.correlation)
     write_csv(out / "eigen.csv", ["index", "singular_value"] + [f"v_{n}" for n in names],
               [[i + 1, rel.singular_values[i]] + list(rel.directions[:, i]) for i in range(len(rel.singular_values))])
-    labels = [reading_label(lab) for lab in res.data.labels]
+    staged = several_stages(res.data.labels)
+    labels = [reading_label(lab, staged) for lab in res.data.labels]
     write_matrix_csv(out / "information_density.csv", labels, rel.information_density)
     measured = res.data.measured
     residual = measured - f.x
@@ -187,6 +237,14 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
               [[h.k, h.mu, h.J] + list(h.p) + [h.accepted] for h in f.history])
     if exploration is not None and exploration.field is not None:
         write_field(exploration.field, out / "field.vtu")
+    if exploration is not None and getattr(exploration, "lining", None) is not None:
+        from .lining import write_lining
+
+        write_lining(exploration.lining, out, vtu=exploration.field is not None)
+    if res.forecasts is not None:
+        from .forecast_report import HEADER, forecast_rows
+
+        write_csv(out / "forecast.csv", HEADER, forecast_rows(res.forecasts))
     if plots:
         from .plots import plot_run
 

@@ -1,6 +1,7 @@
 """`geoback run`: prepare, identify, explore what the outputs need, write every file of one case."""
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from .case import LoadedCase
@@ -19,9 +20,20 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
     analysis = prepare(loaded)
     if prepared is not None:
         prepared(analysis)
-    res = identify(analysis, method=method, progress=progress, profile=profile)
+    res = identify(analysis, method=method, progress=progress, profile=profile, mesh_error=None)
+    if loaded.case.forecasts and res.fit.moved:
+        from .forecast import forecast
+        from .forecast_report import forecast_caveats
+
+        if say is not None:
+            say(f"forecasts: {', '.join(f.name for f in loaded.case.forecasts)}")
+        fc = forecast(analysis, res, progress=say)
+        res = replace(res, forecasts=fc, caveats=tuple(res.caveats) + tuple(forecast_caveats(fc)))
     vtu = loaded.case.output.vtu if vtu is None else vtu
     what = ("field",) if vtu else ()
+    construction = loaded.case.construction
+    if construction is not None and construction.lining is not None:
+        what += ("lining",)  # thrust and moments around the lining: lining.csv, lining.vtu, the figure
     if plots:
         from .plots import exploration_for
 

@@ -10,17 +10,18 @@ import numpy as np
 from .case import LoadedCase
 from .errors import GeobackError
 from .identification import Analysis, prepare
-from .outputs import result_set, write_csv, write_json
+from .outputs import write_csv, write_json
+from .resultsets import result_set
 from .parameters import resolve_values
 from .readings import measured_values
 
-READING_HEADER = ["instrument", "kind", "station", "component", "x", "y", "computed"]
+READING_HEADER = ["instrument", "kind", "station", "component", "stage", "x", "y", "computed"]
 
 
 def reading_rows(labels, computed: np.ndarray, measured: np.ndarray | None = None) -> list[list]:
     rows = []
     for i, lab in enumerate(labels):
-        row = [lab.instrument, lab.kind, lab.station, lab.component, lab.x, lab.y, computed[i]]
+        row = [lab.instrument, lab.kind, lab.station, lab.component, lab.stage, lab.x, lab.y, computed[i]]
         if measured is not None:
             row.append(measured[i])
         rows.append(row)
@@ -45,6 +46,7 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
         measured = None
     header = READING_HEADER + (["measured"] if measured is not None else [])
     rows = reading_rows(sim.survey.labels, x, measured)
+    forces = sim.lining_forces(values)
     with result_set(out, "simulate") as staging:  # the previous set replaced as a whole
         write_csv(staging / "predicted.csv", header, rows)
         write_json(staging / "predicted.json", {
@@ -55,7 +57,18 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
         })
         if vtu:
             write_field(sim.field(values), staging / "field.vtu")
-    return {"readings": x, "dofs": sim.dofs}
+        if forces is not None:  # thrust and moments around the lining: CSV, VTU, figure
+            from .lining import write_lining
+            from .plots import save_figures
+            from .plots.lining import lining_figure
+
+            write_lining(forces, staging, vtu=vtu)
+            fig = lining_figure(forces)
+            try:
+                save_figures({"lining": fig}, staging)
+            finally:
+                fig.clear()
+    return {"readings": x, "dofs": sim.dofs, "lining": forces}
 
 
 def refined_case(case, factor: float):
@@ -72,14 +85,16 @@ def refined_case(case, factor: float):
 
 
 def synthetic_readings(loaded: LoadedCase, refine: float = 2.0, values: Mapping | None = None,
-                       noise_seed: int | None = None, noise_scale: float = 1.0) -> dict[str, np.ndarray]:
+                       noise_seed: int | None = None, noise_scale: float = 1.0, by_stage: bool = False) -> dict:
     """Readings of every instrument from a finer mesh, optionally with noise drawn from C_x.
 
     `values` overrides named quantities, by name as in a case file, with units if wished (e.g.
     {'Egrad[clay]': 500, 'E': '12 MPa', 'B[I1]': 0.002}); unknown names are refused. An
     inclinometer's bias shift ('bias[I1]': 2e-4 rad) adds bias * L_n to its readings; its depth
     offset ('zoff[I1]': '300 mm') reads its stations and reference end that much deeper (the
-    observation operator at the shifted points). Noise is L z with C_x = L L^t per instrument (eqn 10), seeded."""
+    observation operator at the shifted points). Noise is L z with C_x = L L^t per instrument
+    (eqn 10), seeded, independent from stage to stage. Returns {instrument: readings} at the last
+    construction stage, or with `by_stage` {instrument: {stage: readings}} at every stage."""
     fine = loaded.with_case(refined_case(loaded.case, refine))
     analysis = prepare(fine, parameters=[], with_readings=False)
     sim = analysis.simulation
@@ -92,16 +107,26 @@ def synthetic_readings(loaded: LoadedCase, refine: float = 2.0, values: Mapping 
         xi = x[offset:offset + block.m].copy()
         if rng is not None:
             xi += noise_scale * (np.linalg.cholesky(block.covariance) @ rng.standard_normal(block.m))
-        out[block.name] = xi
+        out.setdefault(block.name, {})[block.stage] = xi
         offset += block.m
-    return out
+    if by_stage:
+        return out
+    last = sim.stages[-1]
+    return {name: sets[last] for name, sets in out.items()}
 
 
-def write_readings_csv(loaded, readings: dict[str, np.ndarray], path: Path, notes: list[str] = ()) -> None:
-    """Readings in the CSV layout `readings_file` accepts (instrument, station, reading), exact to the
-    last digit, after `notes` as comment lines (how the data were made)."""
+def write_readings_csv(loaded, readings: dict, path: Path, notes: list[str] = ()) -> None:
+    """Readings in the CSV layout `readings_file` accepts (instrument, station, reading; and stage
+    when `readings` is {instrument: {stage: values}}), exact to the last digit, after `notes` as
+    comment lines (how the data were made)."""
     from .outputs import csv_text, write_atomic
 
-    rows = [[name, i + 1, v] for name, values in readings.items() for i, v in enumerate(values)]
     head = "".join(f"# {line}\n" for line in notes)
+    staged = any(isinstance(v, dict) for v in readings.values())
+    if staged:
+        rows = [[name, stage, i + 1, v] for name, sets in readings.items() for stage, values in sets.items()
+                for i, v in enumerate(values)]
+        write_atomic(Path(path), head + csv_text(["instrument", "stage", "station", "reading"], rows))
+        return
+    rows = [[name, i + 1, v] for name, values in readings.items() for i, v in enumerate(values)]
     write_atomic(Path(path), head + csv_text(["instrument", "station", "reading"], rows))

@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
 
-from .instruments import CONSTANT_STEMS, Survey, is_instrument_error
+from .instruments import CONSTANT_STEMS, Survey, build_survey, is_instrument_error
 
 
 @dataclass
@@ -51,11 +52,13 @@ class Prediction:
 
 @dataclass(frozen=True)
 class Field:
-    """A solution on the mesh, for outputs: nodal displacement (N, 2) and cell data by name."""
+    """A solution on the mesh, for outputs: nodal displacement (N, 2), cell data by name and more
+    point data by name (e.g. the displacement after every construction stage)."""
 
     mesh: object
     displacement: np.ndarray
     cell_data: dict = field(default_factory=dict)
+    point_data: dict = field(default_factory=dict)
 
 
 def is_constant(name: str) -> bool:
@@ -127,6 +130,17 @@ class Simulation(ABC):
     def displacements_at(self, values: Mapping, points: np.ndarray) -> np.ndarray:
         """(ux, uy) at points (k, 2) of the ground; ValueError for a point outside it."""
 
+    def stage_displacements_at(self, values: Mapping, points: np.ndarray, stage: str) -> np.ndarray:
+        """(ux, uy) at points accumulated up to construction stage `stage`."""
+        if stage != self.stages[-1]:
+            raise ValueError(f"this simulation computes stage '{self.stages[-1]}' only, not '{stage}'")
+        return self.displacements_at(values, points)
+
+    def lining_forces(self, values: Mapping):
+        """Thrust, shear and bending moment around the lining per stage (``lining.LiningForces``);
+        None for a model without a lining."""
+        return None
+
     def predict(self, values: Mapping, wrt: Sequence[str] = (), sensitivities: bool = False) -> Prediction:
         """Readings at `values` (constants A-D and the inclinometers' bias and zoff default to 0);
         with `sensitivities`, A = dx/d(wrt).
@@ -170,6 +184,29 @@ class Simulation(ABC):
     def release(self) -> None:
         """Free memory held by factorisations (the simulation stays usable)."""
 
+    # ------------------------------------------------------------------ other instruments
+    SURVEY_CACHES: tuple[str, ...] = ()  # attributes holding results per survey row
+
+    @contextmanager
+    def surveying(self, blocks):
+        """The simulation reading other instruments for a while (forecast points, candidate
+        instruments): the same mesh, factorisations and remembered solutions, another survey.
+
+            with simulation.surveying(blocks) as sim:
+                q = sim.predict(values, names, sensitivities=True)
+        """
+        saved = {a: getattr(self, a) for a in ("survey",) + self.SURVEY_CACHES}
+        self.survey = build_survey(blocks, self.fe)
+        self._survey_changed(saved)
+        try:
+            yield self
+        finally:
+            for a, v in saved.items():
+                setattr(self, a, v)
+
+    def _survey_changed(self, saved: dict) -> None:
+        """Re-derive what SURVEY_CACHES hold for the new survey (`saved`: the old values)."""
+
 
 class Stopwatch:
     """Adds elapsed seconds to a counter attribute: ``with Stopwatch(counters, 'seconds_solving'):``."""
@@ -188,10 +225,15 @@ class Stopwatch:
 
 def make_simulation(loaded, mesh=None, backend: str | None = None, blocks=None, extensions=None) -> Simulation:
     """The simulation a case asks for, with the extension table of `geoback diagnose` available
-    (``diagnosis/extensions.py``) unless another table is given. Today: the one-step
-    linear-elastic excavation."""
+    (``diagnosis/extensions.py``) unless another table is given: the one-step linear-elastic
+    excavation, or the staged one (``staged.py``) when the case has a construction section."""
     from .diagnosis.extensions import EXTENSIONS
     from .elastic import ElasticSimulation
 
+    if loaded.case.construction is not None:
+        from .staged import StagedSimulation
+
+        return StagedSimulation(loaded, mesh=mesh, blocks=blocks, backend=backend,
+                                extensions=EXTENSIONS if extensions is None else extensions)
     return ElasticSimulation(loaded, mesh=mesh, blocks=blocks, backend=backend,
                              extensions=EXTENSIONS if extensions is None else extensions)

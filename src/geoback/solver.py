@@ -31,6 +31,7 @@ def _point_pypardiso_at_mkl() -> None:
 def available_backends() -> list[str]:
     names = []
     try:
+        _point_pypardiso_at_mkl()
         import pypardiso  # noqa: F401
         names.append("pardiso")
     except ImportError:  # pragma: no cover - platform without MKL
@@ -74,9 +75,9 @@ class Factorisation:
         self._raw = _SpanBasis(self.n, self.n)  # right-hand sides met so far and their solutions
         self._coords: dict[int, _SpanBasis] = {}  # the same, keyed by the caller's coordinates
         if self.backend == "pardiso":
+            _point_pypardiso_at_mkl()  # before pypardiso is imported: it looks for MKL at import
             import pypardiso
 
-            _point_pypardiso_at_mkl()
             self._solver = pypardiso.PyPardisoSolver(mtype=2)
             self._solver.set_statistical_info_off()
             self._matrix = upper

@@ -109,6 +109,28 @@ fit:                           # the maximum-likelihood fit (all settings option
   objective_tol: 1.0e-10       # ... or when the relative change of J is below this
   weighting: full              # C_x in J: full (the instruments' covariance), diagonal or identity
 
+forecasts:                     # optional: forecast at the estimate with a 95 % band (forecast.csv, figures)
+  - name: trough               # the surface settlement trough
+    kind: line                 # line | points | convergence | instrument (its next readings) | lining (N, M, V)
+    start: [0.0, 0.0]          # [x, y] [m]
+    end: [30.0, 0.0]           # [x, y] [m]
+    points: 31                 # evenly spaced points
+    component: uy              # ux or uy (up +)
+    alert: 0.05                # optional: report the probability that |uy| exceeds 50 mm
+    # stage: lined             # with construction stages: the stage forecast (default: the last)
+
+# design:                      # optional, for `geoback design`: where would one more instrument pay off?
+#   forecasts: [trough]        # narrow these forecasts (default: all; or objective: parameters)
+#   candidates:                # instruments as above, without readings
+#     - name: I2
+#       kind: inclinometer
+#       x: 8.0
+#       vary: {x: [4, 8, 12, 16]}   # one candidate per value
+#       toe_depth: 24.0
+#       spacing: 3.0
+#       stations: 7
+#       sigma: 0.001
+
 output:                        # what `geoback run` writes (optional)
   # dir: results/example-tunnel   # optional: results folder, relative to this file
   vtu: true                    # write the displacement/stress field as field.vtu (ParaView)

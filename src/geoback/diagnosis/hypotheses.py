@@ -43,6 +43,8 @@ KINDS = {
     "stress-release": "only part of the initial stress released before support (beta < 1)",
     "bias-shift": "an inclinometer's readings carry a constant slope offset (error growing along the casing)",
     "depth-offset": "an inclinometer's probe was read at depths shifted from those recorded",
+    "release-before-lining": "more (or less) stress released before the lining than assumed",
+    "lining-stiffness": "a stiffer or softer lining than assumed",
 }
 
 # What a kind of hypothesis blames: the instruments (their reference, their systematic errors) or the
@@ -99,15 +101,22 @@ def candidate_hypotheses(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
             "K0-gradient", "K0-gradient", "K0 varying with depth",
             f"K0 changes linearly with depth (K0 = K0_axis + K0grad * (depth - {zc:g} m)).",
             [_param("K0grad", 0.0, -0.5, 0.5)]))
-    if "beta" not in baseline:
+    if case.construction is not None:
+        out += _construction_hypotheses(case, values, baseline)
+    elif "beta" not in baseline:  # staged cases model the release before support explicitly
         out.append(Hypothesis(
             "stress-release", "stress-release", "partial stress release before support",
             "Only a fraction beta of the initial stress on the tunnel wall was released by the excavation.",
             [_param("beta", 1.0, 0.05, 1.5)]))
-    errors = set(misfit.simulation.survey.error_names)
+    constants: dict[str, list[str]] = {}  # an instrument read at several stages: every survey's constants
     for block in misfit.data.blocks:
+        constants.setdefault(block.name, []).extend(block.constant_names)
+    errors = set(misfit.simulation.survey.error_names)
+    if not getattr(misfit.simulation, "reads_depth_offsets", False):
+        errors = {n for n in errors if not n.startswith("zoff[")}
+    for block in {b.name: b for b in misfit.data.blocks}.values():
         out += _instrument_error_hypotheses(block, case, errors - baseline)
-        names = [n for n in block.constant_names if n not in baseline]
+        names = [n for n in constants[block.name] if n not in baseline]
         if not names:
             continue
         what = {"inclinometer": "toe (or head) moved", "sliding_micrometer": "anchor moved",
@@ -163,4 +172,35 @@ def _instrument_error_hypotheses(block, case, available: set) -> list[Hypothesis
                 f"The probe of inclinometer '{block.name}' was read at depths shifted from those recorded "
                 f"(zoff > 0: deeper), so each reading is the movement at another depth.",
                 [_param(zoff, 0.0, lo, hi)]))
+    return out
+
+
+def _construction_hypotheses(case, values: dict, baseline: set) -> list[Hypothesis]:
+    """Staged construction with a lining: the release before the lining acts (the CCM's beta) and
+    the lining's stiffness, each free from its assumed value."""
+    from ..construction import StagePlan
+
+    plan = StagePlan.of(case)
+    out: list[Hypothesis] = []
+    if plan.lining is None:
+        return out
+    name = plan.last_release_before_lining()
+    if name is not None and name not in baseline:
+        beta = float(values[name])
+        later = [float(values[r]) for r, lined in zip(plan.release, plan.lined) if r is not None and lined]
+        stage = name[len("beta["):-1]
+        out.append(Hypothesis(
+            "release-before-lining", "release-before-lining",
+            "more or less stress released before the lining than assumed",
+            f"The ground took another fraction of the in-situ stress than the assumed {beta:g} before the lining "
+            f"'{plan.lining_name}' acted ({name}: the face was further or nearer, the lining later or earlier).",
+            [_param(name, beta, 0.02, later[0] if later else 1.0)]))
+    E = f"E[{plan.lining_name}]"
+    if E not in baseline:
+        El = float(values[E])
+        out.append(Hypothesis(
+            "lining-stiffness", "lining-stiffness", "a stiffer or softer lining than assumed",
+            f"The lining '{plan.lining_name}' is stiffer or softer than its assumed E = {El:.4g} kPa (young or "
+            f"cracked shotcrete, joints between segments, another thickness).",
+            [_param(E, El, El / 50, El * 50)]))
     return out

@@ -5,7 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..outputs import result_set, write_atomic, write_json
+from ..outputs import write_atomic, write_json
+from ..resultsets import result_set
 from .compare import detectable_text
 from .hypotheses import CAUSES
 from .procedure import NO_ADDITION

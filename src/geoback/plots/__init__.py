@@ -5,7 +5,9 @@
 - ``convergence``: J and the parameters (relative to their final values) per iteration (Figs. 3-4);
 - ``information``: rows of Q for the readings of highest leverage, and Q itself (Figs. 5, 8);
 - ``instruments``: measured and computed readings along every instrument with +-2 sigma bands;
-- ``field``: the deformed mesh coloured by the displacement magnitude, with the instruments.
+- ``field``: the deformed mesh coloured by the displacement magnitude, with the instruments;
+- ``lining``: thrust, bending moment and shear around the lining per construction stage (models
+  with a lining only).
 
 Figures are built as :class:`matplotlib.figure.Figure` objects without pyplot (no global state,
 headless) from an ``Identification`` and an ``Exploration`` (``geoback.explore``): building them
@@ -25,29 +27,37 @@ from .convergence import convergence_figure
 from .field import field_figure
 from .information import information_density_figure
 from .instruments import instruments_figure
+from .lining import lining_figure
 from .objective import objective_contours_figure
 
 FIGURES = ("objective_contours", "convergence", "information_density", "instruments", "field")
+OPTIONAL = ("lining",)  # figures of what only some models have, built when the exploration holds it
 FORMATS = ("png", "svg")
 NEEDS = {"objective_contours": ("slice", "other"), "convergence": ("other",), "information_density": (),
-         "instruments": ("profiles",), "field": ("field", "profiles")}  # what each reads from the exploration
+         "instruments": ("profiles",), "field": ("field", "profiles"),
+         "lining": ("lining",)}  # what each reads from the exploration
 _BUILD = {"objective_contours": objective_contours_figure, "convergence": convergence_figure,
           "information_density": lambda res, exploration: information_density_figure(res),
-          "instruments": instruments_figure, "field": field_figure}
+          "instruments": instruments_figure, "field": field_figure,
+          "lining": lambda res, exploration: lining_figure(exploration.lining, res) if exploration.lining else None}
 
 
-def exploration_for(names=FIGURES) -> tuple[str, ...]:
+def exploration_for(names=FIGURES + OPTIONAL) -> tuple[str, ...]:
     """What ``explore`` must compute for these figures."""
     return tuple(sorted({w for n in names for w in NEEDS[n]}))
 
 
-def build_figures(res, exploration, names: tuple[str, ...] = FIGURES) -> dict:
-    """Every figure of the run, by name (the exploration must hold what they need)."""
-    unknown = [n for n in names if n not in FIGURES]
+def build_figures(res, exploration, names: tuple[str, ...] | None = None) -> dict:
+    """Every figure of the run, by name (the exploration must hold what they need); by default the
+    FIGURES and, where the exploration has what they show (a lining), the OPTIONAL ones."""
+    if names is None:
+        names = FIGURES + tuple(n for n in OPTIONAL if getattr(exploration, n, None) is not None)
+    unknown = [n for n in names if n not in FIGURES + OPTIONAL]
     if unknown:
-        raise ValueError(f"unknown figure(s): {', '.join(unknown)} (figures: {', '.join(FIGURES)})")
+        raise ValueError(f"unknown figure(s): {', '.join(unknown)} (figures: {', '.join(FIGURES + OPTIONAL)})")
     with matplotlib.rc_context(RC):
-        return {name: _BUILD[name](res, exploration) for name in names}
+        figs = {name: _BUILD[name](res, exploration) for name in names}
+    return {name: fig for name, fig in figs.items() if fig is not None}
 
 
 def _compact_png(data: bytes) -> bytes:
@@ -89,6 +99,11 @@ def save_figures(figs: dict, out: Path, formats: tuple[str, ...] = FORMATS, dpi:
 def plot_run(res, exploration, out: Path, formats: tuple[str, ...] = FORMATS) -> list[Path]:
     """Build every figure of the run and write PNG and SVG files into `out`; return the paths."""
     figs = build_figures(res, exploration)
+    if getattr(res, "forecasts", None) is not None:
+        from .forecast import forecast_figures
+
+        with matplotlib.rc_context(RC):
+            figs.update(forecast_figures(res.forecasts))
     try:
         return save_figures(figs, out, formats)
     finally:

@@ -19,6 +19,8 @@ def information_density_figure(res, top: int = 3) -> Figure:
     m = len(labels)
     multi = multi_component(labels)
     short = [short_label(labels, i, multi) for i in range(m)]
+    if len({lab.stage for lab in labels}) > 1:  # readings of several construction stages
+        short = [f"{t}@{lab.stage}" for t, lab in zip(short, labels)]
     instruments = list(dict.fromkeys(lab.instrument for lab in labels))
     colours = colormaps["tab10"]
     inst_colour = {name: colours(k % 10) for k, name in enumerate(instruments)}
