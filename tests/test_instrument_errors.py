@@ -90,3 +90,18 @@ def test_an_instrument_error_can_be_identified():
     x = an.simulation.predict({**an.values, "bias[I1]": 3e-4}).x
     res = identify(an.with_readings(x))
     assert res["bias[I1]"].value == pytest.approx(3e-4, rel=1e-6)
+
+
+def test_an_inclinometer_read_at_several_stages_has_one_bias_shift_and_no_depth_offset():
+    """The staged physics observes with P alone: one bias shift per inclinometer over its surveys
+    (the same probe), its column L_n on the rows of every stage; no depth offset to hypothesise."""
+    staged = prepare(load_case(CASES / "staged-tunnel.yaml"), parameters=[], with_readings=False)
+    survey = staged.simulation.survey
+    assert survey.error_names == ["bias[I1]"] and not staged.simulation.reads_depth_offsets
+    rows = [i for i, lab in enumerate(survey.labels) if lab.instrument == "I1"]
+    col = survey.bias_column("bias[I1]")
+    assert len({survey.labels[i].stage for i in rows}) == 2
+    assert np.all(col[rows] != 0) and np.all(np.delete(col, rows) == 0)
+    v = dict(staged.values)
+    x0 = staged.simulation.predict(v).x
+    assert np.allclose(staged.simulation.predict({**v, "bias[I1]": 1e-4}).x - x0, 1e-4 * col)

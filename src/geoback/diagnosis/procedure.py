@@ -338,14 +338,26 @@ def _lr_objective(misfit: Misfit, f: Fit) -> float:
     return misfit.evaluate(f.p).support
 
 
+def _group(s: Scored) -> str:
+    """The group a hypothesis is tested in (the depths of one layer boundary; else itself)."""
+    return s.hypothesis.group or s.hypothesis.key
+
+
+def _group_sizes(scored: list[Scored]) -> dict[str, int]:
+    """How many hypotheses each group tests (its Bonferroni factor)."""
+    sizes: dict[str, int] = {}
+    for s in scored:
+        sizes[_group(s)] = sizes.get(_group(s), 0) + 1
+    return sizes
+
+
 def _best_of_groups(scored: list[Scored]) -> list[Scored]:
     """One entry per group (the layer-boundary depth with the largest score, its p-value
     multiplied by the number of depths searched: Bonferroni within the group)."""
     best: dict[str, Scored] = {}
-    size: dict[str, int] = {}
+    size = _group_sizes(scored)
     for s in scored:
-        g = s.hypothesis.group or s.hypothesis.key
-        size[g] = size.get(g, 0) + 1
+        g = _group(s)
         if g not in best or s.score > best[g].score:
             best[g] = s
     for g, s in best.items():
@@ -549,15 +561,12 @@ def _weigh(rnd: Round, cur_rel: Reliability, data) -> None:
 def _detectable(ranking: list[Scored], scored: list[Scored], threshold: float) -> None:
     """The size of each hypothesis' effect its score test would catch with 80 % probability at the
     round's level (members of a group at the level divided by the group's size, as tested)."""
-    sizes: dict[str, int] = {}
-    for s in scored:
-        g = s.hypothesis.group or s.hypothesis.key
-        sizes[g] = sizes.get(g, 0) + 1
+    sizes = _group_sizes(scored)
     cache: dict = {}
     for s in scored:
         if s.collinear_with is not None or s.m2_norms is None:
             continue
-        level = threshold / sizes[s.hypothesis.group or s.hypothesis.key]
+        level = threshold / sizes[_group(s)]
         key = (s.dof, round(level, 12))
         if key not in cache:
             cache[key] = detectable_lambda(s.dof, level)
