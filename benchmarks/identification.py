@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import csv
 import os
 import tempfile
 import time
@@ -33,6 +32,8 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+
+from table import print_table
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_CASE = ROOT / "cases" / "tunnel-paper.yaml"
@@ -168,16 +169,7 @@ def main(argv: list[str] | None = None) -> dict:
         (f"floor time >= {FLOOR_TIME:g}x", "PASS" if ratio_t >= FLOOR_TIME else "FAIL"),
         ("C_p within 2 %", "PASS" if max(frob, frob_std) < 0.02 else "FAIL"),
     ]
-    width = max(len(k) for k, _ in rows)
-    for k, v in rows:
-        print(f"{k.ljust(width)}  {v}")
-    if args.csv:
-        args.csv.parent.mkdir(parents=True, exist_ok=True)
-        with open(args.csv, "w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh, lineterminator="\n")
-            w.writerow(["quantity", "value"])
-            w.writerows(rows)
-    return dict(rows)
+    return print_table(rows, args.csv)
 
 
 if __name__ == "__main__":

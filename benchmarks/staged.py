@@ -26,13 +26,14 @@ from __future__ import annotations
 
 import argparse
 import copy
-import csv
 import os
 import time
 from pathlib import Path
 
 import numpy as np
 import yaml
+
+from table import print_table
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE = ROOT / "cases" / "staged-tunnel.yaml"
@@ -165,16 +166,7 @@ def main(argv: list[str] | None = None) -> dict:
         (f"floor identification <= {FLOOR_RATIO:g}x one forward run", "PASS" if ratio <= FLOOR_RATIO else "FAIL"),
         ("floor factorisations = distinct configurations (2)", "PASS" if g["factorisations"] == 2 else "FAIL"),
     ]
-    width = max(len(k) for k, _ in rows)
-    for k, v in rows:
-        print(f"{k.ljust(width)}  {v}")
-    if args.csv:
-        args.csv.parent.mkdir(parents=True, exist_ok=True)
-        with open(args.csv, "w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh, lineterminator="\n")
-            w.writerow(["quantity", "value"])
-            w.writerows(rows)
-    return dict(rows)
+    return print_table(rows, args.csv)
 
 
 if __name__ == "__main__":

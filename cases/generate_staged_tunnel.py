@@ -11,11 +11,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import yaml
-
-from geoback.case import LoadedCase, case_from_data
 from geoback.outputs import write_csv
-from geoback.simulate import synthetic_readings
+from geoback.simulate import synthetic_readings, without_readings
 
 HERE = Path(__file__).resolve().parent
 CASE = HERE / "staged-tunnel.yaml"
@@ -29,10 +26,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seed", type=int, default=SEED)
     args = parser.parse_args()
-    data = yaml.safe_load(CASE.read_text(encoding="utf-8"))
-    for ins in data["instruments"]:
-        ins.pop("readings_file", None)
-    loaded = LoadedCase(case_from_data(data), CASE, {})
+    loaded = without_readings(CASE)
     readings = synthetic_readings(loaded, refine=2.0, values=TRUTH, noise_seed=args.seed, by_stage=True)
     rows = [[name, stage, i + 1, round(v * 1e3, 4)] for name, sets in readings.items()
             for stage, values in sets.items() for i, v in enumerate(values)]

@@ -25,7 +25,7 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "reproducible"))
 # The default suite (`pytest`, what CI runs) adds the commands, figures, diagnosis, studies and
 # bad-input tests; `pytest -m slow` the long verification runs.
 QUICK_MODULES = {"test_covariance", "test_solver", "test_fem", "test_instruments", "test_identify",
-                 "test_sensitivity_extensions", "test_seam", "test_staged"}
+                 "test_sensitivity_extensions", "test_seam", "test_staged", "test_plastic"}
 
 
 def pytest_collection_modifyitems(config, items):

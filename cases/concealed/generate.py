@@ -64,10 +64,16 @@ TRUTH = {
     "stress-release": ({"beta": 0.7}, None, 12,
                        "only 70 % of the initial stress released before support (beta = 0.7); laboratory tests "
                        "give E = 10 MPa +/- 5 %, entered as a prior", {"mean": 10000.0, "std": 500.0}),
+    "yielding": ({}, None, 13, "the clay yields around the tunnel: Mohr-Coulomb with c' = 45 kPa, phi' = 28 degrees, "
+                              "psi = 5 degrees (a plastic zone to about 1.5 R); the case models it as linear-elastic", None),
     "null-1": ({}, None, 11, "nothing: the baseline model itself (noise only)", None),
     "null-2": ({}, None, 21, "nothing: the baseline model itself (noise only)", None),
     "null-3": ({}, None, 31, "nothing: the baseline model itself (noise only)", None),
 }
+
+
+# the clay of the truth made elastic-perfectly plastic (the case file keeps it linear-elastic)
+STRENGTH = {"yielding": {"model": "mohr-coulomb", "c": 45.0, "phi": 28.0, "psi": 5.0}}
 
 
 def case_text(name: str, header: str, prior) -> str:
@@ -92,6 +98,7 @@ def main(argv=None) -> None:
         data = yaml.safe_load(text)
         if extra_layer:
             data["ground"]["layers"].append(extra_layer)
+        data["ground"]["layers"][0].update(STRENGTH.get(name, {}))
         truth = LoadedCase(case_from_data(data), HERE / f"{name}.yaml", {})
         readings = synthetic_readings(truth, refine=2.0, values=values, noise_seed=seed)
         write_readings_csv(truth, readings, HERE / f"{name}.csv")

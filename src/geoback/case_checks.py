@@ -248,7 +248,9 @@ def physical_problems(case: Case, allow_large: bool = False) -> list[tuple[tuple
             problems.append((("parameters", i, "initial"),
                              f"expected a positive initial value for a log-transformed parameter, found {_g(p.initial)}"))
     from .construction import construction_problems
+    from .strength import strength_problems
 
+    problems.extend(strength_problems(case))
     problems.extend(construction_problems(case))
     pnames = [p.name for p in case.parameters]
     for i, n in enumerate(pnames):

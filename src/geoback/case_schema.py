@@ -1,8 +1,9 @@
 """The case file's schema: pydantic models of every section, and the value parsers they use
 (numbers, flags, stresses with units). Units are SI throughout: lengths in m, stresses and moduli
 in kPa (a string such as ``"10 MPa"`` is also accepted for a stress), unit weight in kN/m³, angles in
-rad. Coordinates are those of the half-model: symmetry axis x = 0, ground surface y = 0, y up
-(depth = -y). Imports nothing else of geoback's case modules (case.py loads and validates)."""
+rad, except the friction and dilation angles of a mohr-coulomb layer, in degrees as engineers
+write them. Coordinates are those of the half-model: symmetry axis x = 0, ground surface y = 0,
+y up (depth = -y). Imports nothing else of geoback's case modules (case.py loads and validates)."""
 from __future__ import annotations
 
 import math
@@ -111,12 +112,27 @@ class Geometry(Strict):
     depth: Positive = Field(description="depth of the model's bottom boundary below the surface [m]")
 
 
+GROUND_MODELS = ("linear-elastic", "mohr-coulomb")
+MC_FIELDS = ("c", "phi", "psi", "tension")  # the strength of a mohr-coulomb layer
+Angle = Annotated[float, BeforeValidator(_number)]
+
+
 class Layer(Strict):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$", description="layer name (letters, digits, _ -)")
     top: NonNegative = Field(description="depth of the layer's top [m]; the first layer starts at 0")
     E: Stress = Field(gt=0, description="Young's modulus [kPa] (or '10 MPa')")
     nu: Num = Field(ge=0.0, lt=0.5, description="Poisson's ratio, 0 <= nu < 0.5")
     K0: Optional[Positive] = Field(None, description="coefficient of earth pressure at rest of this layer")
+    model: Literal["linear-elastic", "mohr-coulomb"] = Field(
+        "linear-elastic", description="'linear-elastic', or 'mohr-coulomb': elastic-perfectly plastic with the strength "
+                                      "c, phi, dilation psi and an optional tension cut-off")
+    c: Optional[Stress] = Field(None, ge=0, description="mohr-coulomb: cohesion c' [kPa] (or '20 kPa'), at least 0")
+    phi: Optional[Angle] = Field(None, gt=0, lt=70, description="mohr-coulomb: friction angle phi' [degrees], "
+                                                                "0 < phi < 70")
+    psi: Optional[Angle] = Field(None, ge=0, lt=70, description="mohr-coulomb: dilation angle psi [degrees], "
+                                                                "0 <= psi <= phi (psi < phi: non-associated flow)")
+    tension: Optional[Stress] = Field(None, ge=0, description="mohr-coulomb, optional: tension cut-off [kPa], the "
+                                                              "largest tensile principal stress (at most c / tan phi)")
 
 
 class Ground(Strict):

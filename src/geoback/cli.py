@@ -257,7 +257,8 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
     def progress(it):
         if talk:
             vals = "  ".join(f"{n} = {v:.6g}" for n, v in zip(names, it.p))
-            mark = "accepted" if it.accepted else "rejected"
+            mark = ("accepted" if it.accepted else "rejected" if it.J < float("inf")
+                    else "rejected (the model has no solution there)")
             _say(f"iteration {it.k:2d}  mu = {it.mu:8.2g}  J = {it.J:<12.6g} {mark}  {vals}")
 
     def named(analysis):

@@ -20,9 +20,9 @@ import numpy as np
 from .case import LoadedCase
 from .fem import FEModel
 from .ground import Ground
-from .instruments import InstrumentBlock, build_survey, case_blocks
+from .instruments import InstrumentBlock
 from .mesh import Mesh, build_mesh
-from .simulation import Counters, Field, Prediction, Simulation, Stopwatch
+from .simulation import Counters, Field, Prediction, Simulation, Stopwatch, stage_survey
 from .solver import Factorisation
 
 PROPORTIONAL = 1e-13  # entry-wise relative tolerance of "K(v) = s K(v_ref)"
@@ -71,13 +71,7 @@ class ElasticSimulation(Simulation):
         t2 = time.perf_counter()
         self.ground = Ground(case, -self.fe.centroid[:, 1], self.fe.region, -self.fe.wall_points[:, 1],
                              extensions or {})
-        blocks = blocks if blocks is not None else [b.at(self.stages[-1]) for b in case_blocks(loaded)]
-        late = [b for b in blocks if b.stage not in self.stages]
-        if late:
-            raise loaded.error(("instruments", late[0].index, "readings"),
-                               f"readings of '{late[0].name}' at stage '{late[0].stage}': the case has one "
-                               f"construction stage ('{self.stages[-1]}')")
-        self.survey = build_survey(blocks, self.fe)
+        self.survey = stage_survey(loaded, blocks, self.stages, self.fe)
         self.timings = {"mesh": t1 - t0, "assembly": t2 - t1, "observations": time.perf_counter() - t2}
         self.backend = backend
         self.counters = Counters()

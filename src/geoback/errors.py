@@ -32,3 +32,9 @@ class CaseError(GeobackError):
             where += ": "
         what = f"{field}: " if field else ""
         super().__init__(f"{where}{what}{message}")
+
+
+class ForwardFailure(GeobackError):
+    """The model could not be solved at the values asked (a non-linear forward run that did not
+    converge, a state outside what the model admits). Inside a fit, a trial point where this
+    happens is a rejected step (``estimate.fit``); elsewhere it is reported like any other error."""

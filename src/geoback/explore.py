@@ -25,7 +25,7 @@ from .simulation import Field
 GRID = 40  # grid points per axis when one factorisation serves the whole grid
 GRID_MIN = 9
 LINE_POINTS = 160  # model values along a linewise instrument
-WHAT = ("slice", "other", "field", "profiles", "lining")
+WHAT = ("slice", "other", "field", "profiles", "lining", "plastic_zone")
 
 
 @dataclass(frozen=True)
@@ -68,6 +68,7 @@ class Exploration:
     field: Field | None = None
     profiles: dict = _field(default_factory=dict)
     lining: object | None = None  # lining.LiningForces at the estimate (models with a lining)
+    plastic_zone: object | None = None  # plastic_zone.PlasticZone at the estimate (ground that can yield)
     counts: dict = _field(default_factory=dict)
     seconds: float = 0.0
 
@@ -206,7 +207,7 @@ def explore(misfit: Misfit, result: Identification, what=WHAT, settings: Setting
     misfit: the one the result was fitted with; what: any of 'slice' (objective slice), 'other'
     (the other method's fit, with `settings`), 'field' (the field at the estimate) and 'profiles'
     (the model along the instruments), 'lining' (thrust and moments around a lining, if the model has
-    one); budget: seconds the slice may take when every grid point refactorises (default: the fit's
+    one), 'plastic_zone' (the yielded ground, if the ground can yield); budget: seconds the slice may take when every grid point refactorises (default: the fit's
     own time, at least 1 s)."""
     unknown = set(what) - set(WHAT)
     if unknown:
@@ -235,4 +236,6 @@ def explore(misfit: Misfit, result: Identification, what=WHAT, settings: Setting
     fld = sim.field(values) if "field" in what else None
     prof = profiles(sim, values) if "profiles" in what else {}
     lining = sim.lining_forces(values) if "lining" in what else None
-    return Exploration(other, note, slc, fld, prof, lining, sim.counters.since(before), time.perf_counter() - t0)
+    zone = sim.plastic_zone(values) if "plastic_zone" in what else None
+    return Exploration(other, note, slc, fld, prof, lining, zone, sim.counters.since(before),
+                       time.perf_counter() - t0)

@@ -27,3 +27,8 @@ CONSTANT_LENGTH = Limits(-10.0, 10.0, (-0.5, 0.5))  # m: an instrument's referen
 CONSTANT_ANGLE = Limits(-1.0, 1.0, (-0.05, 0.05))  # rad: a deflectometer's reference end rotated
 BIAS_SHIFT = Limits(-0.05, 0.05, (-2e-3, 2e-3))  # rad: an inclinometer's constant slope offset per reading
 DEPTH_OFFSET = Limits(-3.0, 3.0, (-0.5, 0.5))  # m: an inclinometer probe's depth positions shifted
+# Mohr-Coulomb strength (kPa, degrees): refused outside [lo, hi], unusual for ground outside `plausible`
+COHESION = Limits(0.0, 1e6, (0.0, 500.0))
+FRICTION = Limits(0.01, 69.99, (15.0, 45.0))  # the schema takes 0 < phi < 70
+DILATION = Limits(0.0, 69.99, (0.0, 20.0))  # and psi <= phi (strength.py)
+TENSION = Limits(0.0, 1e6, (0.0, 500.0))

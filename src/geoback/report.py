@@ -62,6 +62,9 @@ def summary(res, exploration=None) -> dict:
             out["parameters"][n]["dof"] = rel.parameter_dof[i]
         out["ellipse_dof"] = rel.ellipse_dof
         out["ellipse_limit_95"] = rel.ellipse_limit(0.95)
+    zone = getattr(exploration, "plastic_zone", None)
+    if zone is not None:
+        out["plastic_zone"] = zone.as_dict()
     if res.forecasts is not None:
         from .forecast_report import as_dict
 
@@ -78,8 +81,9 @@ def _cv(value: float, std: float) -> str:
     return f" ({100 * std / abs(value):.0f} %)" if std / abs(value) >= 0.01 else f" ({100 * std / abs(value):.2g} %)"
 
 
-def report_text(res) -> str:
-    """A one-page report in the spirit of lmfit's fit_report, warnings first."""
+def report_text(res, exploration=None) -> str:
+    """A one-page report in the spirit of lmfit's fit_report, warnings first; the plastic zone at the
+    estimate when the exploration holds it."""
     f, rel, params = res.fit, res.reliability, res.parameters
     lines = [f"# geoback fit report: {res.name}", ""]
     if res.caveats:
@@ -124,6 +128,9 @@ def report_text(res) -> str:
     lines += ["", "Most informative readings (leverage = diag Q): " +
               ", ".join(f"{reading_label(res.data.labels[i], several_stages(res.data.labels))} "
                         f"({rel.leverage[i]:.2f})" for i in top)]
+    zone = getattr(exploration, "plastic_zone", None)
+    if zone is not None:
+        lines += zone.lines()
     text = "\n".join(lines) + "\n"
     if res.forecasts is not None:
         from .forecast_report import report_section
@@ -241,6 +248,10 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
         from .lining import write_lining
 
         write_lining(exploration.lining, out, vtu=exploration.field is not None)
+    if exploration is not None and getattr(exploration, "plastic_zone", None) is not None:
+        from .plastic_zone import write_plastic_zone
+
+        write_plastic_zone(exploration.plastic_zone, out)
     if res.forecasts is not None:
         from .forecast_report import HEADER, forecast_rows
 
@@ -249,5 +260,5 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
         from .plots import plot_run
 
         plot_run(res, exploration, out)
-    write_atomic(out / "report.md", report_text(res))
+    write_atomic(out / "report.md", report_text(res, exploration))
     write_json(out / "summary.json", summary(res, exploration))

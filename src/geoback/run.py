@@ -6,6 +6,7 @@ from pathlib import Path
 
 from .case import LoadedCase
 from .identification import Identification, identify, prepare
+from .strength import is_plastic
 
 
 def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=None, vtu: bool | None = None,
@@ -34,6 +35,8 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
     construction = loaded.case.construction
     if construction is not None and construction.lining is not None:
         what += ("lining",)  # thrust and moments around the lining: lining.csv, lining.vtu, the figure
+    if is_plastic(loaded.case):
+        what += ("plastic_zone",)  # the yielded ground: plastic_zone.csv, report section, the figure
     if plots:
         from .plots import exploration_for
 

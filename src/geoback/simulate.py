@@ -47,6 +47,7 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
     header = READING_HEADER + (["measured"] if measured is not None else [])
     rows = reading_rows(sim.survey.labels, x, measured)
     forces = sim.lining_forces(values)
+    zone = sim.plastic_zone(values)
     with result_set(out, "simulate") as staging:  # the previous set replaced as a whole
         write_csv(staging / "predicted.csv", header, rows)
         write_json(staging / "predicted.json", {
@@ -54,6 +55,7 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
             "values": values,
             "dofs": sim.dofs,
             "readings": [dict(zip(header, r)) for r in rows],
+            **({"plastic_zone": zone.as_dict()} if zone is not None else {}),
         })
         if vtu:
             write_field(sim.field(values), staging / "field.vtu")
@@ -68,7 +70,31 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
                 save_figures({"lining": fig}, staging)
             finally:
                 fig.clear()
-    return {"readings": x, "dofs": sim.dofs, "lining": forces}
+        if zone is not None:  # the yielded ground: CSV and figure
+            from .plastic_zone import write_plastic_zone
+            from .plots import save_figures
+            from .plots.plastic import plastic_zone_figure
+
+            write_plastic_zone(zone, staging)
+            fig = plastic_zone_figure(zone, name=analysis.case.name)
+            try:
+                save_figures({"plastic_zone": fig}, staging)
+            finally:
+                fig.clear()
+    return {"readings": x, "dofs": sim.dofs, "lining": forces, "plastic_zone": zone}
+
+
+def without_readings(path: Path) -> LoadedCase:
+    """A case file loaded without its instruments' readings (a readings generator's starting point)."""
+    import yaml
+
+    from .case import case_from_data
+
+    data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    for ins in data.get("instruments", []):
+        ins.pop("readings_file", None)
+        ins.pop("readings", None)
+    return LoadedCase(case_from_data(data), Path(path), {})
 
 
 def refined_case(case, factor: float):

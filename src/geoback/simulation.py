@@ -86,6 +86,9 @@ class Simulation(ABC):
     counters: Counters
     timings: dict
     mesh: object
+    # readings only piecewise smooth in the values (ground switching between elastic and plastic): J has
+    # kinks, so an optimiser stops once J no longer falls by a meaningful amount (estimate.PIECEWISE_TOL)
+    piecewise_smooth: bool = False
 
     # ------------------------------------------------------------------ names
     @abstractmethod
@@ -139,6 +142,11 @@ class Simulation(ABC):
     def lining_forces(self, values: Mapping):
         """Thrust, shear and bending moment around the lining per stage (``lining.LiningForces``);
         None for a model without a lining."""
+        return None
+
+    def plastic_zone(self, values: Mapping):
+        """The yielded ground after every stage (``plastic_zone.PlasticZone``); None for a model
+        whose ground cannot yield."""
         return None
 
     def predict(self, values: Mapping, wrt: Sequence[str] = (), sensitivities: bool = False) -> Prediction:
@@ -223,13 +231,35 @@ class Stopwatch:
         return False
 
 
+def stage_survey(loaded, blocks, stages: list[str], fe) -> Survey:
+    """The survey of `blocks` on the FE model `fe` (default: every instrument of the case read at the
+    last stage); a block read at a stage the simulation does not compute is refused, located."""
+    from .instruments import build_survey, case_blocks
+
+    blocks = blocks if blocks is not None else [b.at(stages[-1]) for b in case_blocks(loaded)]
+    late = [b for b in blocks if b.stage not in stages]
+    if late:
+        expected = (f"expected one of the construction stages ({', '.join(stages)})" if len(stages) > 1
+                    else f"the case has one construction stage ('{stages[-1]}')")
+        raise loaded.error(("instruments", late[0].index, "readings"),
+                           f"readings of '{late[0].name}' at stage '{late[0].stage}': {expected}")
+    return build_survey(blocks, fe)
+
+
 def make_simulation(loaded, mesh=None, backend: str | None = None, blocks=None, extensions=None) -> Simulation:
     """The simulation a case asks for, with the extension table of `geoback diagnose` available
     (``diagnosis/extensions.py``) unless another table is given: the one-step linear-elastic
-    excavation, or the staged one (``staged.py``) when the case has a construction section."""
+    excavation, the staged one (``staged.py``) when the case has a construction section, or the
+    elastoplastic one (``plastic.py``, stages included) when a layer is mohr-coulomb."""
     from .diagnosis.extensions import EXTENSIONS
     from .elastic import ElasticSimulation
+    from .strength import is_plastic
 
+    if is_plastic(loaded.case):
+        from .plastic import PlasticSimulation
+
+        return PlasticSimulation(loaded, mesh=mesh, blocks=blocks, backend=backend,
+                                 extensions=EXTENSIONS if extensions is None else extensions)
     if loaded.case.construction is not None:
         from .staged import StagedSimulation
 

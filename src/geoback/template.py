@@ -18,7 +18,8 @@ TEMPLATE = """\
 # parameters with `geoback run case.yaml`; `geoback schema` prints the full JSON Schema.
 #
 # Units are SI throughout: lengths in m, stresses and moduli in kPa (a string such as
-# "10 MPa" is accepted for a stress or a modulus), unit weights in kN/m3, angles in rad.
+# "10 MPa" is accepted for a stress or a modulus), unit weights in kN/m3, angles in rad
+# (except a mohr-coulomb layer's friction and dilation angles, in degrees).
 # Coordinates are those of the half-model: x = 0 on the tunnel's symmetry axis, x > 0
 # towards the far side, y = 0 at the ground surface and y upwards (so depth = -y).
 #
@@ -45,6 +46,11 @@ ground:                        # initial state and stiffness of the ground
       E: 10 MPa                # Young's modulus [kPa] or a string with a unit (Pa, kPa, MPa, GPa)
       nu: 0.49                 # Poisson's ratio [-], 0 <= nu < 0.5 (0.49: undrained)
       # K0: 0.8                # optional: this layer's own K0 (overrides ground.K0)
+      # model: mohr-coulomb    # optional: a ground that yields (default linear-elastic), then also:
+      # c: 20 kPa              #   cohesion c' [kPa]
+      # phi: 28                #   friction angle phi' [degrees], 0 < phi < 70
+      # psi: 0                 #   dilation angle [degrees], 0 <= psi <= phi
+      # tension: 5 kPa         #   optional tension cut-off [kPa], at most c / tan(phi)
 
 mesh:                          # gmsh triangles; meshes are cached (env GEOBACK_CACHE)
   size_tunnel: 0.4             # element size at the tunnel wall [m] (default R/8)

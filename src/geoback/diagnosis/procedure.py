@@ -13,7 +13,9 @@
    determine (a significant hypothesis with an undetermined parameter, e.g. a deep stratum of
    unbounded modulus, is accepted only when nothing determined is, and then as tentative); look
    once more; stop when adequate or nothing more is significant. A layer boundary's depth is
-   profiled over a continuous depth (``depth.py``).
+   profiled over a continuous depth (``depth.py``). Hypotheses that no score test can rank
+   (yielding: at an elastic state every sensitivity to the strength is zero; ``yielding.py``) are
+   screened instead and refitted whenever the model is not adequate, in the same Bonferroni family.
 5. Compare (``compare.py``): Akaike weights of the refitted hypotheses and of the model without
    them; a rival within 2 AIC of the accepted one is reported with the readings that would tell
    them apart; the size of effect each score test could have detected.
@@ -56,6 +58,8 @@ from ..estimate import Fit, Settings, fit
 from ..identification import Identification, conclude
 from ..misfit import Misfit
 from ..reliability import Reliability, chi2_sf
+from ..simulation import is_instrument_term
+from . import yielding
 from .compare import EQUAL_AIC, akaike_weights, detectable_lambda, separation
 from .depth import DepthProfile, profile_depth
 from .hypotheses import Hypothesis, candidate_hypotheses
@@ -328,6 +332,14 @@ def score_hypotheses(misfit: Misfit, p_hat: np.ndarray, hypotheses: list[Hypothe
         S = float(np.sum((M2 @ coef) ** 2))
         out.append(Scored(h, S, k, chi2_sf(S, k), J0=J0, misfit=ext, m2_norms=np.linalg.norm(M2, axis=0)))
     return out
+
+
+def _modelled(misfit: Misfit, h: Hypothesis) -> bool:
+    """Can the misfit's simulation take the hypothesis' parameters (yielding ground has no anisotropy)?
+    The survey's own terms (integration constants, an inclinometer's bias and depth offset) are
+    offered only where the survey has them (``hypotheses.candidate_hypotheses``)."""
+    sim = misfit.simulation
+    return all(sim.canonical(q.name) is not None for q in h.parameters if not is_instrument_term(q.name))
 
 
 def _lr_objective(misfit: Misfit, f: Fit) -> float:
@@ -605,11 +617,12 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             rounds.append(Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, [], None, True,
                                 scales=cur_rel.error_scales, scale_threshold=scale_level))
             break
-        hyps = candidate_hypotheses(current, cur_fit.p)
+        hyps = [h for h in candidate_hypotheses(current, cur_fit.p) if _modelled(current, h)]
         say(f"scoring {len(hyps)} hypotheses")
         ranking = _best_of_groups(scored := score_hypotheses(current, cur_fit.p, hyps))
         testable = [s for s in ranking if s.collinear_with is None]
-        threshold = alpha / max(len(testable), 1)
+        unscored = yielding.screen(current, cur_fit.p)  # likelihood-ratio refits only (yielding.py)
+        threshold = alpha / max(len(testable) + len(unscored), 1)
         _detectable(ranking, scored, threshold)
         # adequate: the omnibus chi^2 test passes (readings of known sigma), every estimated error
         # scale is within what the case allows, and no targeted alternative is significant
@@ -640,6 +653,10 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             s.refit, s.reliability = _fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
             _compare(s, s.J0, 0)
             _judge(s)
+        for y in (yielding.refit(h, current, cur_fit, settings, method, say) for h in unscored):
+            if y is not None:
+                _judge(y)
+                ranking.append(y)
         significant = [s for s in ranking if s.refit is not None and s.p_lr < threshold and _settled(s.refit)]
         rnd.accepted, rnd.tentative = _choose(significant)
         if rnd.accepted is not None and rnd.accepted.profile is not None:

@@ -192,7 +192,7 @@ def diagnosis_text(d) -> str:
                     if not s.determined:
                         est += " **not determined**"
                 fmt = (lambda v: f"{v:.4g}" if np.isfinite(v) else "-")
-                lines.append(f"| {s.hypothesis.title} | {cause} | {s.score:.4g} | {s.p_score:.2g} | {fmt(s.dJ)} | "
+                lines.append(f"| {s.hypothesis.title} | {cause} | {fmt(s.score)} | {fmt(s.p_score)} | {fmt(s.dJ)} | "
                              f"{fmt(s.p_lr)} | {fmt(s.aic)} | {fmt(s.weight) if np.isfinite(s.weight) else '-'} | "
                              f"{fmt(s.bic)} | {est} |")
             if rnd.weights:

@@ -19,11 +19,15 @@ when psi != phi), starting with the tangent of the last converged state, until
     || R ||_2  <=  tol || lambda_{n+1} f ||_2          (tol = 1e-10 by default).           (2)
 
 A Newton that fails (``max_iterations`` reached, residual not finite or growing 1e6-fold) is
-retried with half the increment (adaptive schedule) down to ``min_increment``; a fixed
-schedule, a too small increment or ``max_increments`` attempts raise :class:`NonConvergence`
+retried with half the increment (adaptive schedule, or a fixed one with ``refine``) down to
+``min_increment``; a fixed schedule without ``refine``, a too small increment or
+``max_increments`` attempts raise :class:`NonConvergence`
 naming the increment, lambda and the residual - never a silent result. After a quick
 convergence (<= ``fast`` iterations) the next increment grows by ``growth``, up to
-``max_increment`` (fractions of the final lambda).
+``max_increment`` (fractions of the final lambda). While the state is elastic, the ends of a fixed
+schedule that an elastic step reaches with every point elastic are one increment (the response is
+linear there, so the solution and its sensitivities are the same; ``schedule.elastic_reach``). A
+run may start each increment's Newton iteration from an earlier run's solution of it (``warm``).
 
 Direct differentiation (DDM)
 ----------------------------
@@ -43,14 +47,19 @@ and differentiating (1) at the converged increment,
 
 with K_t the consistent tangent at the converged state (factorised once there; it also serves
 as the first Newton matrix of the next increment), so every parameter costs one
-back-substitution per increment. e_{n+1} is one complex-step evaluation of the return mapping
-per parameter (exact to rounding); the history d sigma_n/dp starts at d sigma0/dp. The result
+back-substitution per increment. A run without sensitivities does not factorise the converged
+tangent: the last Newton matrix (the tangent one iterate earlier) starts the next increment. (Reaching
+K_t by iterative refinement from the last Newton matrix instead was measured slower at 50 k DOFs:
+PARDISO stalls at a relative residual of 3e-13 to 5e-13 after two or three refinement steps, and
+three back-substitutions of four columns cost more than one factorisation; a run with four
+sensitivities took 10.3-11.2 s that way against 9.4-10.1 s factorising K_t.) e_{n+1} is one
+complex-step evaluation of the return mapping per parameter (exact to rounding); the history d sigma_n/dp starts at d sigma0/dp. The result
 is the exact derivative of the discrete solution for the schedule used: finite differences
 must replay that schedule (``Options(schedule=result.schedule)``).
 
 API
 ---
-``solve(fe, material, sigma0, f, stages, derivatives=None, options=None, operators=None)``
+``solve(fe, material, sigma0, f, stages, derivatives=None, options=None, operators=None, warm=None)``
 
 * ``fe``: :class:`~geoback.fem.FEModel`; ``operators``: a :class:`PointOperators` of ``fe`` to
   reuse between runs (built if not given).
@@ -60,13 +69,15 @@ API
 * ``stages``: increasing release fractions lambda_i > 0 where results are wanted.
 * ``derivatives``: list of :class:`ParameterDerivative` (fields default to zero).
 * ``options``: :class:`Options` (tolerance, increments, backend, fixed schedule).
+* ``warm``: the ``Result.warm`` of an earlier run (same schedule) to start each increment from.
 
 Returns :class:`Result`: ``u`` (n_stages, nfree), ``du_dp`` (n_stages, nfree, n_params) or
 None, ``sigma`` (n_stages, ne, nq, 4), ``plastic`` / ``yielded`` (n_stages, ne, nq) booleans
 (yielding in the stage's last increment / at any increment so far), ``increments`` (log of
 every Newton attempt with its residual history), ``schedule`` (to replay), ``counters``
-(factorisations, back-substitutions, Newton iterations, increments, cutbacks, apex points,
-seconds by part). Raises :class:`NonConvergence` (a ``GeobackError``) or ``ValueError`` for
+(factorisations, back-substitutions, Newton iterations, increments, cutbacks, apex points, warm
+starts, seconds by part), ``warm`` (every increment's solution). Raises :class:`NonConvergence`
+(a ``ForwardFailure``, itself a ``GeobackError``) or ``ValueError`` for
 inputs of the wrong shape, non-increasing stages or an initial stress outside the yield surface.
 
 Limits
@@ -85,20 +96,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import GeobackError
+from ..errors import ForwardFailure
 from . import mohr_coulomb as mc
 from .linear import LU, Counters, SingularMatrix
+from .schedule import Steps, elastic_reach
 from .mohr_coulomb import Material
 from .operators import PointOperators
 
 
-class NonConvergence(GeobackError):
+class NonConvergence(ForwardFailure):
     """The global Newton failed; carries the increment number, lambda and the residual."""
 
     def __init__(self, increment: int, stage: int, lam_from: float, lam_to: float, residual: float,
                  iterations: int, reason: str, tol: float):
         self.increment, self.stage, self.lam, self.residual = increment, stage, lam_to, residual
         self.iterations, self.reason = iterations, reason
+        self.counters = None  # the run's Counters, attached by solve()
         super().__init__(
             f"elastoplastic solution failed in increment {increment} (stage {stage}, lambda {lam_from:.6g} -> "
             f"{lam_to:.6g}): relative residual {residual:.3e} after {iterations} Newton iterations "
@@ -116,6 +129,7 @@ class Options:
     fast: int = 4  # converged in at most this many iterations: the next increment grows
     max_increments: int = 400  # Newton attempts (converged or not) in the whole run
     schedule: tuple | None = None  # fixed: per stage, increasing fractions s in (0, 1], ending at 1
+    refine: bool = False  # a fixed schedule's failed increment is halved (down to min_increment) instead of failing
     backend: str | None = None  # 'pardiso' | 'scipy' | None (plasticity.linear.default_backend)
 
 
@@ -163,6 +177,7 @@ class Result:
     schedule: tuple  # per stage, the fractions s where increments ended (Options(schedule=...) replays)
     counters: Counters
     tol: float
+    warm: dict = field(default_factory=dict)  # (stage index, s) -> u at the end of every converged increment
 
     def converged_residuals(self) -> np.ndarray:
         """Final relative residual of every converged increment."""
@@ -238,6 +253,7 @@ class _Converged:
     mode: np.ndarray
     C: np.ndarray
     residuals: list = field(default_factory=list)
+    refactorised: bool = False  # the last correction used a tangent factorised in this increment (in `work`)
 
 
 class _Failed(Exception):
@@ -261,18 +277,34 @@ class _Problem:
         """Consistent tangent: the elastic stiffness, corrected on the elements with plastic points."""
         with self.counters.timed("assemble tangent"):
             plastic = np.flatnonzero((mode != mc.ELASTIC).reshape(self.ops.ne, self.ops.nq).any(axis=1))
+            if not len(plastic):
+                return self.K_elastic
             Ke = self.ops.element_matrices(C, plastic) - self.Ke_elastic[plastic]
             return self.ops.assemble(Ke, plastic, base=self.K_elastic.data)
 
-    def newton(self, state: _State, lam: float, first: LU, work: LU) -> _Converged:
+    def newton(self, state: _State, lam: float, first: LU, work: LU, start: np.ndarray | None = None) -> _Converged:
         """Full Newton for the increment state.lam -> lam; the first correction with `first`
-        (the converged tangent of the previous state), the next ones refactorise into `work`."""
+        (the converged tangent of the previous state), the next ones refactorise into `work`. It
+        starts from the previous state, or from `start` (an earlier run's solution of this
+        increment) when the residual is smaller there."""
         ops, opts = self.ops, self.opts
         ref = abs(lam) * self.f_norm
         r = self.residual(state.sigma, lam)
         u = state.u.copy()
         lu = first
         residuals = []
+        if start is not None:
+            with self.counters.timed("return mapping and tangent"):
+                deps = ops.strain(start - state.u)
+                sigma, mode = mc.update(state.sigma, deps, self.mat)
+            r_start = self.residual(sigma, lam)
+            if np.linalg.norm(r_start) < np.linalg.norm(r):
+                self.counters.warm_starts += 1
+                u, r = start.copy(), r_start
+                rel = float(np.linalg.norm(r) / ref)
+                if rel <= opts.tol:  # the same increment solved before
+                    C = mc.consistent_tangent(state.sigma, deps, self.mat, mode)
+                    return _Converged(u, sigma, deps, mode, C, [rel], False)
         for it in range(1, opts.max_iterations + 1):
             u += lu.solve(-r)
             self.counters.newton_iterations += 1
@@ -285,7 +317,7 @@ class _Problem:
             if not np.isfinite(rel):
                 raise _Failed(residuals, "residual not finite")
             if rel <= opts.tol:
-                return _Converged(u, sigma, deps, mode, C, residuals)
+                return _Converged(u, sigma, deps, mode, C, residuals, lu is work)
             if rel > 1e6 * residuals[0] and it > 1:
                 raise _Failed(residuals, "residual grew a million-fold")
             if it == opts.max_iterations:
@@ -295,48 +327,6 @@ class _Problem:
             except SingularMatrix as exc:
                 raise _Failed(residuals, str(exc)) from None
         raise _Failed(residuals, f"no convergence in {opts.max_iterations} iterations")
-
-
-class _Steps:
-    """Where increments end inside a stage (fractions s of it): a fixed schedule, or adaptive
-    (the step, a lambda difference, is carried from stage to stage)."""
-
-    def __init__(self, opts: Options, lam_end: float):
-        self.opts, self.lam_end = opts, lam_end
-        self.step = opts.first_increment * lam_end
-
-    def stage(self, i: int, lam_a: float, lam_b: float):
-        self.lam_a, self.lam_b = lam_a, lam_b
-        self.fixed = None
-        if self.opts.schedule is not None:
-            fixed = [float(x) for x in np.atleast_1d(self.opts.schedule[i])]
-            if not fixed or fixed[-1] != 1.0 or fixed[0] <= 0 or np.any(np.diff(fixed) <= 0):
-                raise ValueError(f"schedule of stage {i + 1} must increase to exactly 1, found {fixed}")
-            self.fixed = fixed
-        self.used = []
-
-    def next(self, s: float) -> float:
-        if self.fixed is not None:
-            return self.fixed[len(self.used)]
-        s_new = min(1.0, s + self.step / (self.lam_b - self.lam_a))
-        return 1.0 if 1.0 - s_new < 1e-9 else s_new
-
-    def lam(self, s: float) -> float:
-        return self.lam_b if s == 1.0 else self.lam_a + s * (self.lam_b - self.lam_a)
-
-    def converged(self, s: float, iterations: int) -> None:
-        self.used.append(s)
-        if self.fixed is None and iterations <= self.opts.fast:
-            self.step = min(self.step * self.opts.growth, self.opts.max_increment * self.lam_end)
-
-    def failed(self, dlam: float) -> str | None:
-        """Cut the step back; the reason to give up, if any."""
-        if self.fixed is not None:
-            return "fixed schedule"
-        self.step = 0.5 * dlam
-        if self.step < self.opts.min_increment * self.lam_end:
-            return f"increment cut below {self.opts.min_increment:g} of the final lambda"
-        return None
 
 
 def _check(ops: PointOperators, material, sigma0, f, stages, opts: Options):
@@ -362,8 +352,11 @@ def _check(ops: PointOperators, material, sigma0, f, stages, opts: Options):
 
 
 def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = None,
-          options: Options | None = None, operators: PointOperators | None = None) -> Result:
-    """Release f in increments up to each of `stages`; see the module docstring."""
+          options: Options | None = None, operators: PointOperators | None = None,
+          warm: dict | None = None) -> Result:
+    """Release f in increments up to each of `stages`; see the module docstring. `warm`: the
+    ``Result.warm`` of an earlier run at nearby values (same schedule): each increment's Newton
+    iteration starts from that run's solution of it when its residual is smaller there."""
     opts = options or Options()
     ops = operators or PointOperators(fe)
     counters = Counters()
@@ -377,17 +370,20 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
     conv, work = LU(counters, opts.backend), LU(counters, opts.backend)
     conv.factorise(problem.K_elastic)
     conv_elastic = True  # conv holds the elastic stiffness
-    steps = _Steps(opts, stages[-1])
+    steps = Steps(opts, stages[-1])
     out = dict(u=[], du=[], sigma=[], plastic=[], yielded=[])
     yielded = np.zeros(ops.npts, bool)
     mode = np.zeros(ops.npts, int)
     logs, schedule = [], []
+    solved = {}  # (stage, s) -> u of every converged increment, to warm-start a later run
     try:
         lam_a, dlam_a = 0.0, (np.zeros(len(der.names)) if der else None)
         for i, lam_b in enumerate(stages):
             steps.stage(i, lam_a, lam_b)
             s = 0.0
             while s < 1.0:
+                if conv_elastic:  # a fixed schedule's ends an elastic step reaches: one increment (exact)
+                    elastic_reach(problem, state, steps, conv)
                 s_new = steps.next(s)
                 lam = steps.lam(s_new)
                 number = counters.increments + 1
@@ -399,7 +395,7 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
                 if len(logs) >= opts.max_increments:
                     raise failure(f"budget of {opts.max_increments} Newton attempts exhausted", [])
                 try:
-                    res = problem.newton(state, lam, conv, work)
+                    res = problem.newton(state, lam, conv, work, (warm or {}).get((i, s_new)))
                 except _Failed as fail:
                     logs.append(IncrementLog(number, i + 1, lam, lam - state.lam, fail.residuals, False,
                                              reason=fail.reason))
@@ -413,7 +409,11 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
                 n_plastic = int(np.count_nonzero(mode))
                 counters.apex_points += int(np.count_nonzero(mode == mc.APEX))
                 logs.append(IncrementLog(number, i + 1, lam, lam - state.lam, res.residuals, True, n_plastic))
-                if not (conv_elastic and n_plastic == 0):
+                if der is None and not (conv_elastic and n_plastic == 0):
+                    if res.refactorised:  # no sensitivities: the last Newton matrix starts the next increment
+                        conv, work = work, conv
+                        conv_elastic = False
+                elif not (conv_elastic and n_plastic == 0):
                     try:  # the tangent at the converged state: for the sensitivities and the next increment
                         conv.factorise(problem.tangent(res.C, res.mode))
                     except SingularMatrix as exc:
@@ -423,8 +423,13 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
                 new = _State(res.u, res.sigma, lam)
                 if der is not None:
                     new.dlam = dlam_a + s_new * (der.stages[i] - dlam_a)
-                    _sensitivities(problem, der, state, new, res, conv)
+                    try:
+                        _sensitivities(problem, der, state, new, res, conv)
+                    except SingularMatrix as exc:
+                        raise failure(f"the tangent at the converged state is singular ({exc})",
+                                      res.residuals) from None
                 yielded |= mode != mc.ELASTIC
+                solved[(i, s_new)] = res.u
                 state, s = new, s_new
                 steps.converged(s_new, len(res.residuals))
             schedule.append(tuple(steps.used))
@@ -435,12 +440,15 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
             out["yielded"].append(yielded.reshape(ops.ne, ops.nq).copy())
             if der is not None:
                 out["du"].append(state.du.copy())
+    except NonConvergence as exc:
+        exc.counters = counters  # what the failed run spent
+        raise
     finally:
         conv.release()
         work.release()
     return Result(stages, np.array(out["u"]), np.array(out["du"]) if der else None, der.names if der else [],
                   np.array(out["sigma"]), np.array(out["plastic"]), np.array(out["yielded"]), logs,
-                  tuple(schedule), counters, opts.tol)
+                  tuple(schedule), counters, opts.tol, solved)
 
 
 def _sensitivities(problem: _Problem, der: _Derivatives, old: _State, new: _State, res: _Converged, lu: LU):

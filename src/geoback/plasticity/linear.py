@@ -3,8 +3,8 @@
 The consistent tangent of Mohr-Coulomb with non-associated flow is not symmetric, so the SPD
 solver of ``geoback.solver`` does not apply. Backends: ``pardiso`` (Intel MKL PARDISO via
 pypardiso, real unsymmetric, mtype 11; the analysis is kept for all matrices of one pattern) from
-``SMALL`` unknowns up when installed, else ``scipy`` (SuperLU, COLAMD ordering with partial
-pivoting). ``GEOBACK_SOLVER`` chooses, as for the elastic solver. Every
+``SMALL`` unknowns up when installed, else ``scipy`` (SuperLU, minimum-degree ordering of A + A^t
+with threshold pivoting, ``SUPERLU``). ``GEOBACK_SOLVER`` chooses, as for the elastic solver. Every
 factorisation and every back-substituted column is counted in a shared :class:`Counters`.
 """
 from __future__ import annotations
@@ -31,6 +31,7 @@ class Counters:
     newton_iterations: int = 0  # linear solves of the Newton corrections (all attempts)
     cutbacks: int = 0  # increments halved after a failed Newton
     apex_points: int = 0  # point updates that fell back to the apex (see mohr_coulomb.APEX)
+    warm_starts: int = 0  # increments whose Newton iteration started from an earlier run's solution
     seconds: dict = field(default_factory=lambda: defaultdict(float))
 
     def timed(self, key: str):
@@ -38,7 +39,7 @@ class Counters:
 
     def summary(self) -> dict:
         out = {k: getattr(self, k) for k in ("factorisations", "backsubstitutions", "increments",
-                                               "newton_iterations", "cutbacks", "apex_points")}
+                                               "newton_iterations", "cutbacks", "apex_points", "warm_starts")}
         out["seconds"] = {k: round(v, 4) for k, v in self.seconds.items()}
         return out
 
@@ -59,6 +60,10 @@ class SingularMatrix(RuntimeError):
 
 
 SMALL = 10000  # below this many unknowns SuperLU factorises unsymmetric tangents as fast as PARDISO
+# The tangent's pattern is symmetric (only its values are not): a minimum-degree ordering of A + A^t with
+# diagonal pivots preferred (threshold partial pivoting at 0.1) fills less than COLAMD; measured on a
+# 2.4 k-DOF Mohr-Coulomb tangent, 7-9 ms per factorisation against 9-14 ms (busy 2-core machine).
+SUPERLU = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"SymmetricMode": True})
 
 
 def default_backend(n: int) -> str:
@@ -100,7 +105,7 @@ class LU:
                 if self.backend == "pardiso":
                     self._pardiso(A)
                 else:
-                    self._lu = spla.splu(A.tocsc(), permc_spec="COLAMD")
+                    self._lu = spla.splu(A.tocsc(), **SUPERLU)
             except Exception as exc:  # SuperLU: RuntimeError; pypardiso: PyPardisoError
                 raise SingularMatrix(f"{self.backend} could not factorise the matrix: {exc}") from None
         self._A = A
@@ -146,3 +151,4 @@ class LU:
         self._A = None
         self._lu = None
         self._pattern = None
+

@@ -7,7 +7,8 @@
 - ``instruments``: measured and computed readings along every instrument with +-2 sigma bands;
 - ``field``: the deformed mesh coloured by the displacement magnitude, with the instruments;
 - ``lining``: thrust, bending moment and shear around the lining per construction stage (models
-  with a lining only).
+  with a lining only);
+- ``plastic``: the plastic zone around the tunnel after every stage (ground that can yield only).
 
 Figures are built as :class:`matplotlib.figure.Figure` objects without pyplot (no global state,
 headless) from an ``Identification`` and an ``Exploration`` (``geoback.explore``): building them
@@ -29,17 +30,20 @@ from .information import information_density_figure
 from .instruments import instruments_figure
 from .lining import lining_figure
 from .objective import objective_contours_figure
+from .plastic import plastic_zone_figure
 
 FIGURES = ("objective_contours", "convergence", "information_density", "instruments", "field")
-OPTIONAL = ("lining",)  # figures of what only some models have, built when the exploration holds it
+OPTIONAL = ("lining", "plastic_zone")  # figures of what only some models have, built when the exploration holds it
 FORMATS = ("png", "svg")
 NEEDS = {"objective_contours": ("slice", "other"), "convergence": ("other",), "information_density": (),
          "instruments": ("profiles",), "field": ("field", "profiles"),
-         "lining": ("lining",)}  # what each reads from the exploration
+         "lining": ("lining",), "plastic_zone": ("plastic_zone",)}  # what each reads from the exploration
 _BUILD = {"objective_contours": objective_contours_figure, "convergence": convergence_figure,
           "information_density": lambda res, exploration: information_density_figure(res),
           "instruments": instruments_figure, "field": field_figure,
-          "lining": lambda res, exploration: lining_figure(exploration.lining, res) if exploration.lining else None}
+          "lining": lambda res, exploration: lining_figure(exploration.lining, res) if exploration.lining else None,
+          "plastic_zone": lambda res, exploration: (plastic_zone_figure(exploration.plastic_zone, res)
+                                                    if exploration.plastic_zone else None)}
 
 
 def exploration_for(names=FIGURES + OPTIONAL) -> tuple[str, ...]:

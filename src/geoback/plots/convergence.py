@@ -27,7 +27,7 @@ def convergence_figure(res, exploration) -> Figure:
         name = METHOD_NAMES.get(fit.method, fit.method)
         axJ.semilogy(k, Jv, color=st["color"], ls=st["ls"], marker=st["marker"], ms=5, lw=1.6,
                      label=f"{name}: J = {fit.J:.3g}")
-        rej = [(h.k, h.J) for h in fit.history if not h.accepted]
+        rej = [(h.k, h.J) for h in fit.history if not h.accepted and np.isfinite(h.J)]  # not: no solution there
         if rej:
             rk, rJ = np.array(rej).T
             axJ.plot(rk, np.maximum(rJ, 1e-300), ls="none", marker="x", color=st["color"], ms=5)

@@ -1,0 +1,131 @@
+"""Hypothesis 'the ground yields around the tunnel': a Mohr-Coulomb plastic zone the linear-elastic
+baseline leaves out, tested by a likelihood-ratio refit rather than a score test.
+
+Why not a score test. Every other hypothesis of the library is scored at the baseline optimum by
+the projection of the residual on its sensitivity columns (procedure.py, step 3). Yielding has no
+such column: the elastic baseline is the plastic model at c' = infinity (or at any cohesion above
+what the elastic stresses need), where no point is plastic and every derivative of the readings
+with respect to the strength is exactly zero. The score statistic is then 0 whatever the readings,
+so it cannot rank the hypothesis. Yielding is therefore tested as a likelihood ratio of two fits:
+
+1. Screen (cheap, at the baseline optimum): the elastic stresses of the fit, per element near the
+   tunnel (centroid within SCREEN_RADIUS * R of the axis), ask for a cohesion
+       c_req = [(s1 - s3) + (s1 + s3) sin phi] / (2 cos phi)    (s1 >= s3 the in-plane principal
+   stresses, tension positive; phi = PHI) to stay within the Mohr-Coulomb strength; c_crit is the
+   largest of them in each layer. The hypothesis is put forward for a layer when c_crit exceeds
+   the strength the weakest plausible ground of that stiffness would have, E / STIFFNESS_TO_STRENGTH
+   (stiffness-to-strength ratios of soils and weak rocks lie roughly between 100 and 2000): were
+   even that ground to stay elastic, no plausible strength could make it yield. The in-plane
+   stresses give a lower bound of c_req (an out-of-plane stress outside them only adds to it).
+2. Refit from a yielding state: the layer made mohr-coulomb with phi' = PHI (a plausible default,
+   fixed: a tunnel's readings mostly tell the strength at the wall's confinement, which c' then
+   carries) and psi = PSI, its cohesion c' identified together with the baseline's parameters,
+   starting from c_crit / MARGIN - the elastic stresses exceed that strength by MARGIN at the
+   wall, a small plastic zone from which the fit can grow or shrink it (c' up to 2 c_crit: an
+   elastic ground again).
+3. The likelihood-ratio test dJ ~ chi^2(1) as for the other refits, in the same Bonferroni family.
+   The null (c' at or above c_crit, every point elastic) lies on the boundary of the parameter
+   space, where the statistic is a 50:50 mixture of 0 and chi^2(1): the chi^2(1) reference is
+   conservative.
+
+A refit runs only when the baseline is not adequate (procedure.py): readings that an elastic model
+explains are never called yielding. Not proposed when the simulation already yields, or for a case
+with a lining (a lining on yielding ground is not modelled).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..case import Parameter
+from ..errors import ForwardFailure
+from .extensions import EXTENSIONS
+from .hypotheses import KINDS, Hypothesis
+
+PHI = 30.0  # degrees: friction angle of the refit (fixed)
+PSI = 0.0  # degrees: dilation angle of the refit (fixed; no volume change in shear)
+MARGIN = 1.5  # the refit starts where the elastic stresses exceed the strength by this factor at the wall
+STIFFNESS_TO_STRENGTH = 2000.0  # E / c of the weakest plausible ground
+SCREEN_RADIUS = 1.5  # elements whose centroid lies within this many radii of the tunnel axis
+
+KINDS.setdefault("yielding", "the ground yields around the tunnel (Mohr-Coulomb plastic zone)")
+
+
+def required_cohesion(sxx: np.ndarray, syy: np.ndarray, sxy: np.ndarray, phi_deg: float = PHI) -> np.ndarray:
+    """c that puts in-plane stresses (compression negative) on the Mohr-Coulomb surface of friction
+    angle phi: [(s1 - s3) + (s1 + s3) sin phi] / (2 cos phi)."""
+    m, r = 0.5 * (sxx + syy), np.hypot(0.5 * (sxx - syy), sxy)
+    s1, s3 = m + r, m - r
+    phi = math.radians(phi_deg)
+    return ((s1 - s3) + (s1 + s3) * math.sin(phi)) / (2 * math.cos(phi))
+
+
+def screen(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
+    """The yielding hypotheses worth a refit at the baseline optimum (see the module docstring)."""
+    sim = misfit.simulation
+    case = sim.loaded.case
+    if getattr(sim, "piecewise_smooth", False) or (case.construction is not None and case.construction.lining):
+        return []
+    values = misfit.values(p_hat)
+    if any(n.startswith("zoff[") for n in misfit.parameters.names) or sim.survey.offsets(values):
+        return []  # the elastoplastic simulation does not read inclinometers at depth offsets
+    fld = sim.field(values)
+    mesh, cell = fld.mesh, fld.cell_data
+    g = case.geometry
+    centroid = mesh.nodes[mesh.triangles[:, :3]].mean(axis=1)
+    near = np.hypot(centroid[:, 0], centroid[:, 1] + g.axis_depth) < SCREEN_RADIUS * g.radius
+    c_req = required_cohesion(cell["stress_xx"], cell["stress_yy"], cell["stress_xy"])
+    out = []
+    for i, layer in enumerate(case.ground.layers):
+        sel = near & (mesh.region == i)
+        if not sel.any():
+            continue
+        c_crit = float(c_req[sel].max())
+        E = float(values[f"E[{layer.name}]"])
+        weakest = E / STIFFNESS_TO_STRENGTH
+        if c_crit <= weakest:
+            continue
+        c0 = c_crit / MARGIN
+        name = layer.name
+        several = sum(1 for j in range(len(case.ground.layers)) if (near & (mesh.region == j)).any()) > 1
+        out.append(Hypothesis(
+            f"yielding[{name}]", "yielding",
+            "the ground yields around the tunnel" + (f" ('{name}')" if several else "")
+            + f" (Mohr-Coulomb, phi' = {PHI:g} deg and psi = {PSI:g} deg assumed)",
+            f"The ground of '{name}' yields around the tunnel (Mohr-Coulomb, phi' = {PHI:g} deg and psi = {PSI:g} deg "
+            f"fixed, c' identified). At the elastic fit its stresses near the tunnel would need c' of at least "
+            f"{c_crit:.3g} kPa to stay elastic, above the {weakest:.3g} kPa of the weakest plausible ground of "
+            f"E = {E:.4g} kPa (E/c = {STIFFNESS_TO_STRENGTH:g}); the refit starts from c' = {c0:.3g} kPa (a plastic "
+            f"zone at the wall) and is tested by likelihood ratio (no score test: at an elastic state every "
+            f"sensitivity to the strength is zero).",
+            [Parameter(name=f"c[{name}]", initial=c0, bounds=(c_crit / 200, 2 * c_crit), log=True)]))
+    return out
+
+
+def refit(h: Hypothesis, current, cur_fit, settings, method: str, say):
+    """The baseline with the hypothesis' layer made mohr-coulomb, fitted; a procedure.Scored with its
+    likelihood-ratio test (score and its p-value are NaN: there is none), or None if the yielding
+    model cannot be solved from its start."""
+    from ..plastic import PlasticSimulation
+    from .procedure import REFIT_ITERATIONS, Scored, _compare, _fit_and_assess, _lr_objective
+
+    sim = current.simulation
+    loaded = sim.loaded
+    layer = h.key[len("yielding["):-1]
+    c0 = h.parameters[0].initial
+    layers = [ly.model_copy(update={"model": "mohr-coulomb", "c": c0, "phi": PHI, "psi": PSI})
+              if ly.name == layer else ly for ly in loaded.case.ground.layers]
+    case = loaded.case.model_copy(update={"ground": loaded.case.ground.model_copy(update={"layers": layers})})
+    say(f"refitting with {h.title} (c' from {c0:.3g} kPa, phi' = {PHI:g} deg)")
+    s = Scored(h, float("nan"), len(h.parameters), float("nan"))
+    try:
+        plastic = PlasticSimulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
+                                    backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
+        s.misfit = current.extended(h.parameters, simulation=plastic, start=cur_fit.p)
+        s.refit, s.reliability = _fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
+    except ForwardFailure as exc:
+        say(f"  not refitted: {exc}")
+        return None
+    _compare(s, _lr_objective(current, cur_fit), 0)
+    return s

@@ -1,0 +1,80 @@
+"""`geoback diagnose` names yielding ground (diagnosis/yielding.py): the concealed case
+cases/concealed/yielding.yaml is linear-elastic while its readings come from Mohr-Coulomb clay
+(c' = 45 kPa, phi' = 28 deg, psi = 5 deg, a plastic zone to about 1.57 R; made by
+cases/concealed/generate.py on a mesh twice as fine, with noise). Measured: chi^2/dof 45.3 before
+(E = 5.1 MPa, K0 = 0.86: a softened ground mimics the yielding), 1.07 after (E = 10.4 +- 0.15 MPa,
+K0 = 1.003, c' = 39.9 +- 0.4 kPa with phi' = 30 deg, psi = 0 assumed; truth E = 10 MPa, K0 = 1).
+The null cases, elastic readings, are never called yielding."""
+import math
+
+import numpy as np
+import pytest
+
+from conftest import CASES
+from geoback.case import load_case
+from geoback.diagnosis import diagnose
+from geoback.diagnosis.yielding import MARGIN, PHI, required_cohesion, screen
+from geoback.estimate import fit
+from geoback.identification import prepare
+
+CONCEALED = CASES / "concealed"
+
+
+def test_required_cohesion_is_the_mohr_coulomb_surface():
+    """A deep tunnel's elastic wall under hydrostatic p0 (s_r = 0, s_t = -2 p0) needs
+    c = p0 (1 - sin phi) / cos phi to stay elastic; rotating the stress changes nothing."""
+    p0 = 240.0
+    for angle in (0.0, 0.3, 1.1):
+        c, s = math.cos(angle), math.sin(angle)
+        sxx, syy, sxy = -2 * p0 * s * s, -2 * p0 * c * c, 2 * p0 * s * c  # (0, -2 p0) rotated
+        got = float(required_cohesion(np.array([sxx]), np.array([syy]), np.array([sxy]))[0])
+        phi = math.radians(PHI)
+        assert got == pytest.approx(p0 * (1 - math.sin(phi)) / math.cos(phi), rel=1e-12)
+
+
+def test_screen_at_the_elastic_fit_proposes_a_yielding_start():
+    analysis = prepare(load_case(CONCEALED / "yielding.yaml"))
+    f = fit(analysis.misfit, analysis.settings)
+    (h,) = screen(analysis.misfit, f.p)
+    assert h.kind == "yielding" and h.names == ["c[clay]"]
+    c0 = h.parameters[0].initial
+    # the wall's elastic stresses (about 240 kPa of overburden at the axis) need c' of the order of
+    # 0.58 p0 with phi' = 30 deg; the refit starts MARGIN below it
+    assert 0.3 * 240 < c0 * MARGIN < 1.2 * 240
+
+
+@pytest.fixture(scope="module")
+def yielding():
+    return diagnose(load_case(CONCEALED / "yielding.yaml"))
+
+
+def test_yielding_is_named_and_the_fit_improves(yielding):
+    d = yielding
+    assert not d.adequate_before
+    assert [s.hypothesis.kind for s in d.accepted] == ["yielding"]
+    s = d.accepted[0]
+    assert math.isnan(s.score) and s.p_lr < 1e-10 and s.dJ > 1000  # tested by likelihood ratio
+    assert d.adequate_after
+    assert d.final_reliability.reduced_chi2 < 1.5 < 10 < d.baseline_reliability.reduced_chi2
+    # the final model yields: a plastic zone around the tunnel at the fitted strength
+    sim = d.final_misfit.simulation
+    zone = sim.plastic_zone(d.final_misfit.values(d.final_fit.p))
+    assert 1.2 < zone.stages[-1].max_radius / 3.0 < 2.0
+    # the baseline softened E to mimic the yielding; with it modelled E comes back towards the truth (10 MPa)
+    E_before = d.baseline_fit.p[d.baseline_reliability.names.index("E[clay]")]
+    E_after = d.final_fit.p[d.final_reliability.names.index("E[clay]")]
+    assert E_before < 6000 and abs(E_after - 10000) < abs(E_before - 10000)
+
+
+def test_diagnosis_text_says_it(yielding):
+    from geoback.diagnosis import diagnosis_text
+
+    text = diagnosis_text(yielding)
+    assert "Missing - Ground physics: the ground yields around the tunnel" in text and "| nan" not in text
+
+
+@pytest.mark.parametrize("name", ["null-1", "null-2", "null-3"])
+def test_null_cases_are_not_called_yielding(name):
+    d = diagnose(load_case(CONCEALED / f"{name}.yaml"))
+    assert d.adequate_before and "yielding" not in [s.hypothesis.kind for s in d.accepted]
+    assert not any(s.hypothesis.kind == "yielding" for r in d.rounds for s in r.ranking)  # not even refitted
