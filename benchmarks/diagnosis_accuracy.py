@@ -12,8 +12,16 @@ effect of random kind and magnitude that the case's (baseline) model lacks:
   K0-gradient           K0grad = +-k, k log-uniform in (0.01, 0.08) per m
   integration-constant  the toe of inclinometer I1 moved: B[I1] = +-b, b log-uniform in (1, 8) mm
   stress-release        beta = 1 - d, d log-uniform in (0.05, 0.4), with a prior on E in the case
-                        (mean = true E, std 5 %: without it beta is not separable from E)
+                        (std 5 % of the true E, mean drawn from N(true E, that std): without it beta
+                        is not separable from E)
+  bias-shift            inclinometer I1's probe has a bias shift: bias[I1] = +-b, b log-uniform in
+                        (0.03, 0.5) mm/m (every slope reading off by b: the readings by b L_n)
+  depth-offset          inclinometer I1 read deeper or shallower than recorded: zoff[I1] = +-d, d
+                        log-uniform in (0.1, 0.6) m (shallower at most 80 % of its top station's depth)
   null                  nothing (noise only)
+
+Causes: integration-constant, bias-shift and depth-offset are instrument error, the others ground
+physics; a case is also scored by cause (instrument error / ground physics / nothing).
 
 Readings are those of the truth on a mesh twice as fine (geoback.simulate.synthetic_readings,
 refine = 2) with noise drawn from each instrument's C_x (random seed); the case given to
@@ -31,7 +39,12 @@ standard deviation of reading i (sqrt diag C_x).
 A case's answer is the kind of the FIRST accepted hypothesis ('nothing' if none is accepted);
 correct when it equals the truth kind ('integration-constant' for a moved toe). A null case is a
 false alarm when anything is accepted. Floors (issue): >= 90 % correct names among concealed
-cases with effect size > 3; <= 5 % false alarms on null cases.
+cases with effect size > 3; <= 5 % false alarms on null cases; every bias-shift case with effect
+size > 3 named as instrument error.
+
+Coverage: for a correctly named case, whether the 95 % interval of each of its extra parameters
+(final joint fit, as the verdict reports it) holds the truth: Egrad, E[clay_below] and the
+boundary's depth (profile likelihood), n, K0grad, B[I1], beta, bias[I1], zoff[I1].
 
     python benchmarks/diagnosis_accuracy.py [--concealed 60] [--null 30] [--seed 2024]
         [--workers 2] [--out benchmarks/out/diagnosis_accuracy.csv] [--show INDEX]
@@ -71,12 +84,20 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "out" / "diagnosis_accuracy.csv"
 KINDS = ["stiffness-gradient", "layer-boundary", "anisotropy", "K0-gradient", "integration-constant",
-         "stress-release"]
+         "stress-release", "bias-shift", "depth-offset"]
+INSTRUMENT_KINDS = {"integration-constant", "bias-shift", "depth-offset"}
 THRESHOLD = 3.0  # sigma
 FLOOR_ACCURACY, FLOOR_FALSE_ALARMS = 0.90, 0.05
 COLUMNS = ["case", "kind", "parameter", "magnitude", "effect_size", "raw_movement", "named", "correct",
-           "accepted", "estimate", "round1", "p_before", "chi2dof_before", "chi2dof_after", "top_score_kind",
-           "readings", "seconds", "R", "axis_depth", "E", "nu", "K0", "layout", "noise_seed", "error"]
+           "cause", "named_cause", "accepted", "tentative", "estimate", "covered", "rival", "round1", "p_before",
+           "chi2dof_before", "chi2dof_after", "top_score_kind", "readings", "seconds", "R", "axis_depth", "E", "nu",
+           "K0", "layout", "noise_seed", "error"]
+
+
+def cause_of(kind: str) -> str:
+    if kind in ("null", "nothing", "error", ""):
+        return kind or "nothing"
+    return "instrument" if kind in INSTRUMENT_KINDS else "ground"
 
 
 def _loguniform(rng, lo: float, hi: float) -> float:
@@ -84,9 +105,13 @@ def _loguniform(rng, lo: float, hi: float) -> float:
 
 
 # ------------------------------------------------------------------------------------------ cases
-def random_case(index: int, kind: str, master_seed: int) -> dict:
-    """The case data (baseline model, no readings), the truth's extras and the noise seed."""
+def random_case(index: int, kind: str, master_seed: int, strong: bool = False) -> dict:
+    """The case data (baseline model, no readings), the truth's extras and the noise seed.
+    strong: effect magnitudes from the upper half (in log) of each kind's range (coverage study)."""
     rng = np.random.default_rng([master_seed, index])
+
+    def _effect(rng, lo, hi):  # an effect's magnitude: from the upper half (in log) when strong
+        return _loguniform(rng, math.sqrt(lo * hi) if strong else lo, hi)
     R = float(rng.uniform(2.0, 4.0))
     zc = float(rng.uniform(2.5 * R, 5.0 * R))
     width = round(15.0 * R, 2)
@@ -130,26 +155,37 @@ def random_case(index: int, kind: str, master_seed: int) -> dict:
     extra_layer = None
     parameter, magnitude = "", float("nan")
     if kind == "stiffness-gradient":
-        parameter, magnitude = "Egrad[clay]", _loguniform(rng, 0.2, 3.0) * E / 30.0
+        parameter, magnitude = "Egrad[clay]", _effect(rng, 0.2, 3.0) * E / 30.0
         values = {parameter: magnitude}
     elif kind == "layer-boundary":
-        ratio = _loguniform(rng, 1.5, 4.0)
+        ratio = _effect(rng, 1.5, 4.0)
         z = float(rng.uniform(zc + R + 2.0, zc + 12.0))
         extra_layer = {"name": "sand", "top": round(z, 3), "E": ratio * E, "nu": nu}
         parameter, magnitude = f"E2/E (top {z:.2f} m)", ratio
-    elif kind == "anisotropy":
-        parameter, magnitude = "n[clay]", _loguniform(rng, 1.1, 2.0)
+    elif kind == "anisotropy":  # below the positive-definite limit (1 - nu) / (2 nu^2) of high nu
+        parameter = "n[clay]"
+        magnitude = min(_effect(rng, 1.1, 2.0), 0.9 * (1 - round(nu, 4)) / (2 * round(nu, 4) ** 2))
         values = {parameter: magnitude}
     elif kind == "K0-gradient":
-        parameter, magnitude = "K0grad", float(rng.choice([-1.0, 1.0])) * _loguniform(rng, 0.01, 0.08)
+        parameter, magnitude = "K0grad", float(rng.choice([-1.0, 1.0])) * _effect(rng, 0.01, 0.08)
         values = {parameter: magnitude}
     elif kind == "integration-constant":
-        parameter, magnitude = "B[I1]", float(rng.choice([-1.0, 1.0])) * _loguniform(rng, 0.001, 0.008)
+        parameter, magnitude = "B[I1]", float(rng.choice([-1.0, 1.0])) * _effect(rng, 0.001, 0.008)
         values = {parameter: magnitude}
     elif kind == "stress-release":
-        parameter, magnitude = "beta", 1.0 - _loguniform(rng, 0.05, 0.4)
+        parameter, magnitude = "beta", 1.0 - _effect(rng, 0.05, 0.4)
         values = {parameter: magnitude}
         e_prior = {"mean": E, "std": 0.05 * E}
+    elif kind == "bias-shift":
+        parameter, magnitude = "bias[I1]", float(rng.choice([-1.0, 1.0])) * _effect(rng, 3e-5, 5e-4)
+        values = {parameter: magnitude}
+    elif kind == "depth-offset":
+        i1 = instruments[0]
+        top = i1["toe_depth"] - i1["stations"] * i1["spacing"]  # the shallowest station's depth
+        d = _effect(rng, 0.1, 0.6)
+        magnitude = d if rng.uniform() < 0.5 else -min(d, 0.8 * top)
+        parameter = "zoff[I1]"
+        values = {parameter: magnitude}
     elif kind != "null":
         raise ValueError(kind)
 
@@ -166,13 +202,48 @@ def random_case(index: int, kind: str, master_seed: int) -> dict:
         "parameters": [e_param, {"name": "K0", "initial": float(rng.uniform(0.4, 1.6)), "bounds": [0.05, 5.0]}],
     }
     noise_seed = int(rng.integers(0, 2**31 - 1))
+    if e_prior:  # the laboratory's E is itself uncertain: its mean drawn from N(true E, its std)
+        e_prior["mean"] = float(E + e_prior["std"] * rng.standard_normal())
+    truth = dict(values)  # the extra parameters' true values, by the names diagnose gives them
+    if extra_layer:
+        truth = {"E[clay_below]": extra_layer["E"], "depth[clay]": extra_layer["top"]}
     return {"index": index, "kind": kind, "data": data, "values": values, "extra_layer": extra_layer,
-            "parameter": parameter, "magnitude": magnitude, "noise_seed": noise_seed,
+            "parameter": parameter, "magnitude": magnitude, "noise_seed": noise_seed, "truth": truth,
             "R": R, "zc": zc, "E": E, "nu": nu, "K0": K0, "layout": " ".join(layout)}
+
+
+def coverage(d, truth: dict) -> list[dict]:
+    """Whether each extra parameter's 95 % interval (final joint fit, as reported) holds the truth,
+    for the FIRST accepted hypothesis; a boundary's depth by its profile likelihood."""
+    if not d.accepted:
+        return []
+    s = d.accepted[0]
+    out = []
+    for name, v, sd, lo, hi in d.estimates(s):
+        if name in truth:
+            out.append({"name": name, "truth": truth[name], "estimate": v, "std": sd, "low": lo, "high": hi,
+                        "covered": bool(lo <= truth[name] <= hi), "tentative": not s.determined})
+    prof = d.depth_profile(s)
+    if prof is not None and f"depth[{prof.layer}]" in truth:
+        t = truth[f"depth[{prof.layer}]"]
+        half = max(prof.high - prof.z_hat, prof.z_hat - prof.low) / 1.96
+        out.append({"name": f"depth[{prof.layer}]", "truth": t, "estimate": prof.z_hat, "std": half,
+                    "low": prof.low, "high": prof.high, "covered": bool(prof.low <= t <= prof.high),
+                    "tentative": not s.determined})
+    return out
 
 
 def _stack(readings: dict, analysis) -> np.ndarray:
     return np.concatenate([readings[b.name] for b in analysis.simulation.survey.blocks])
+
+
+def _with_noise(clean: dict, loaded, seed: int) -> dict:
+    """Noise drawn from each instrument's C_x, as synthetic_readings(noise_seed=seed) draws it."""
+    from geoback.instruments import case_blocks
+
+    rng = np.random.default_rng(seed)
+    return {b.name: clean[b.name] + np.linalg.cholesky(b.covariance) @ rng.standard_normal(b.m)
+            for b in case_blocks(loaded)}
 
 
 def run_one(spec: dict, folder: str, show: bool = False) -> dict:
@@ -184,7 +255,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
     from geoback.simulate import synthetic_readings
 
     row = {k: "" for k in COLUMNS}
-    row.update(case=spec["data"]["name"], kind=spec["kind"], parameter=spec["parameter"],
+    row.update(case=spec["data"]["name"], kind=spec["kind"], parameter=spec["parameter"], cause=cause_of(spec["kind"]),
                magnitude=spec["magnitude"], noise_seed=spec["noise_seed"], R=round(spec["R"], 3),
                axis_depth=round(spec["zc"], 3), E=round(spec["E"], 1), nu=round(spec["nu"], 3),
                K0=round(spec["K0"], 3), layout=spec["layout"])
@@ -196,8 +267,8 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
             truth_data["ground"]["layers"].append(dict(spec["extra_layer"]))
         truth = LoadedCase(case_from_data(truth_data), path, {})
 
-        noisy = synthetic_readings(truth, refine=2.0, values=spec["values"], noise_seed=spec["noise_seed"])
         clean = synthetic_readings(truth, refine=2.0, values=spec["values"], noise_seed=None)
+        noisy = _with_noise(clean, loaded, spec["noise_seed"])  # what synthetic_readings(noise_seed=...) gives
         base_clean = synthetic_readings(loaded, refine=2.0, values=None, noise_seed=None)
 
         problem = prepare(loaded, with_readings=False)
@@ -221,14 +292,22 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         kinds = [s.hypothesis.kind for s in d.accepted]
         named = kinds[0] if kinds else "nothing"
         row["named"] = named
+        row["cause"], row["named_cause"] = cause_of(spec["kind"]), cause_of(named)
         row["accepted"] = " + ".join(s.hypothesis.key for s in d.accepted)
         row["correct"] = (named == "nothing") if spec["kind"] == "null" else (named == spec["kind"])
         if d.accepted:
             s = d.accepted[0]
-            i = s.reliability.names.index(s.hypothesis.names[0])
-            row["estimate"] = f"{s.hypothesis.names[0]}={s.refit.p[i]:.4g}±{s.reliability.std[i]:.2g}"
-            if s.hypothesis.kind == "layer-boundary":
-                row["estimate"] += " z=" + ",".join(f"{v:g}" for v in s.hypothesis.extra_values.values())
+            row["tentative"] = not s.determined
+            row["estimate"] = " ".join(f"{n}={v:.4g}±{sd:.2g}[{lo:.4g},{hi:.4g}]" for n, v, sd, lo, hi in d.estimates(s))
+            prof = d.depth_profile(s)
+            if prof is not None:
+                row["estimate"] += f" z={prof.z_hat:.4g}[{prof.low:.4g},{prof.high:.4g}]"
+        rivals = [r.rival.hypothesis.key for r in d.rounds if r.rival is not None]
+        row["rival"] = " ".join(rivals)
+        if row["correct"] and spec["kind"] != "null":
+            cov = coverage(d, spec["truth"])
+            row["coverage"] = cov
+            row["covered"] = " ".join(f"{c['name']}:{'yes' if c['covered'] else 'NO'}" for c in cov)
         r0 = d.rounds[0]
         row["p_before"] = r0.p_value
         scored = [s for s in r0.ranking if s.collinear_with is None]
@@ -241,6 +320,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
     except Exception as exc:  # one broken case is reported, not fatal
         row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")[:300]
         row["named"] = row["named"] or "error"
+        row["named_cause"] = row["named_cause"] or "error"
         row["correct"] = False
     return row
 
@@ -257,7 +337,7 @@ def confusion(rows: list[dict], title: str) -> str:
     named = KINDS + ["nothing"] + sorted({r["named"] for r in rows} - set(KINDS) - {"nothing"})
     short = {"stiffness-gradient": "Egrad", "layer-boundary": "layer", "anisotropy": "aniso",
              "K0-gradient": "K0grad", "integration-constant": "int-const", "stress-release": "beta",
-             "nothing": "nothing", "error": "error"}
+             "bias-shift": "bias", "depth-offset": "zoff", "nothing": "nothing", "error": "error"}
     cols = [c for c in named if c in KINDS + ["nothing"] or any(r["named"] == c for r in rows)]
     w0 = max(len(t) for t in truths + ["truth \\ named"]) + 1
     head = "truth \\ named".ljust(w0) + "".join(short.get(c, c).rjust(10) for c in cols) + "   n  correct"
@@ -271,6 +351,38 @@ def confusion(rows: list[dict], title: str) -> str:
     if not truths:
         lines.append("(no cases)")
     return "\n".join(lines)
+
+
+def cause_confusion(rows: list[dict], title: str) -> str:
+    """Truth cause (instrument error / ground physics / null) against the named cause."""
+    truths = [t for t in ("instrument", "ground", "null") if any(r["cause"] == t for r in rows)]
+    cols = ["instrument", "ground", "nothing"] + sorted({r["named_cause"] for r in rows}
+                                                         - {"instrument", "ground", "nothing", ""})
+    head = "truth \\ named".ljust(16) + "".join(c.rjust(12) for c in cols) + "   n"
+    lines = [title, head, "-" * len(head)]
+    for t in truths:
+        sub = [r for r in rows if r["cause"] == t]
+        lines.append(t.ljust(16) + "".join(str(sum(r["named_cause"] == c for r in sub)).rjust(12) for c in cols)
+                     + f"{len(sub):4d}")
+    return "\n".join(lines)
+
+
+def coverage_table(rows: list[dict]) -> tuple[str, list[dict]]:
+    """Coverage of the extra parameters' 95 % intervals over the correctly named cases, per kind."""
+    table = []
+    for kind in KINDS + ["all"]:
+        items = [c for r in rows if r.get("coverage") and (kind == "all" or r["kind"] == kind) for c in r["coverage"]]
+        if not items:
+            continue
+        n, k = len(items), sum(c["covered"] for c in items)
+        p = k / n
+        table.append({"kind": kind, "intervals": n, "covered": k, "coverage": p,
+                      "se": math.sqrt(max(p * (1 - p), 1e-12) / n)})
+    lines = ["Coverage of the extra parameters' 95 % intervals (final joint fit), correctly named cases:",
+             "kind                  intervals covered  coverage"]
+    lines += [f"{t['kind']:<22}{t['intervals']:>9}{t['covered']:>8}  {100 * t['coverage']:5.1f} % ± {100 * t['se']:.1f}"
+              for t in table]
+    return "\n".join(lines), table
 
 
 def summary(rows: list[dict], seconds: float) -> tuple[str, bool]:
@@ -294,8 +406,23 @@ def summary(rows: list[dict], seconds: float) -> tuple[str, bool]:
         confusion(raw + nulls, f"Confusion matrix, concealed cases with raw movement > {THRESHOLD:g} sigma "
                                f"({len(raw)}) and null cases ({len(nulls)}):"),
         "",
+        cause_confusion(big + nulls, f"By cause, concealed cases with effect size > {THRESHOLD:g} and null cases:"),
+        "",
+        coverage_table(rows)[0],
+        "",
     ]
     ok = True
+    bias = [r for r in big if r["kind"] == "bias-shift"]
+    if bias:
+        named = sum(r["named_cause"] == "instrument" for r in bias)
+        passed = named == len(bias)
+        ok &= passed
+        out.append(f"bias-shift cases named as instrument error (effect size > {THRESHOLD:g}): {named}/{len(bias)} "
+                   f"({'PASS' if passed else 'FAIL'}: all must be)")
+    tentative = [r for r in concealed if r["tentative"] is True]
+    rivals = [r for r in concealed if r["rival"]]
+    out.append(f"tentative answers (a parameter not determined): {len(tentative)}; answers with a rival within "
+               f"2 AIC: {len(rivals)}")
 
     def rate(sub):
         n = len(sub)

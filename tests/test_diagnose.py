@@ -21,7 +21,10 @@ EXPECTED = {
     "K0-gradient": ("K0-gradient", "K0grad", -0.06),
     "toe-moved": ("integration-constant", "B[I1]", 0.004),
     "stress-release": ("stress-release", "beta", 0.7),
+    "bias-shift": ("bias-shift", "bias[I2]", 4e-4),
+    "depth-offset": ("depth-offset", "zoff[I1]", 0.5),
 }
+INSTRUMENT = {"toe-moved", "bias-shift", "depth-offset"}  # concealed instrument errors, not ground physics
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED))
@@ -36,6 +39,30 @@ def test_concealed_effect_is_named_estimated_and_fixes_the_fit(name):
     assert lo[i] <= truth <= hi[i], (param, d.final_fit.p[i], rel.std[i])
     assert d.adequate_after
     assert rel.reduced_chi2 < d.baseline_reliability.reduced_chi2
+    if name == "layer-boundary":  # the depth by profile likelihood over a continuous depth, with its interval
+        prof = d.depth_profile(d.accepted[0])
+        assert prof.has_interval and prof.low <= 16.0 <= prof.high and prof.high - prof.low < 1.0
+        assert not prof.low_open and not prof.high_open
+    cause = "instrument" if name in INSTRUMENT else "ground"
+    assert [s.hypothesis.cause for s in d.accepted] == [cause]
+    assert d.causes[cause] and not d.causes["ground" if cause == "instrument" else "instrument"]
+
+
+def test_bias_shift_is_named_as_instrument_error_in_words_and_json(tmp_path):
+    from geoback.diagnosis import write_diagnosis
+    from geoback.diagnosis.report import verdict
+
+    d = diagnose(load_case(CONCEALED / "bias-shift.yaml"))
+    text = verdict(d)
+    assert text.startswith("The mismatch is instrument error, not ground physics.")
+    assert "bias shift" in text
+    write_diagnosis(d, tmp_path, plots=False)
+    data = json.loads((tmp_path / "diagnosis.json").read_text())
+    assert data["cause"] == "instrument error"
+    assert data["instrument_error"] == ["bias-shift[I2]"] and data["ground_physics"] == []
+    assert data["missing"][0]["cause"] == "instrument error"
+    est = data["missing"][0]["estimates"]["bias[I2]"]
+    assert est["from"] == "final joint fit" and est["ci95"][0] <= 4e-4 <= est["ci95"][1]
 
 
 @pytest.mark.parametrize("name", ["null-1", "null-2", "null-3"])
@@ -54,7 +81,8 @@ def test_cli_writes_diagnosis_files(tmp_path):
     out = subprocess.run([sys.executable, "-m", "geoback.cli", "diagnose", str(CONCEALED / "null-1.yaml"),
                           "--out", str(tmp_path), "-q"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    assert "Nothing is missing" in out.stdout
+    assert "No effect the library can detect is missing" in out.stdout  # not "nothing is missing"
+    assert "would have caught, with 80 % probability" in out.stdout  # and what size it would have caught
     data = json.loads((tmp_path / "diagnosis.json").read_text())
     assert data["adequate_before"] is True and data["missing"] == []
     assert (tmp_path / "diagnosis.md").read_text().startswith("# geoback diagnosis")
@@ -75,3 +103,69 @@ def test_null_case_with_a_moving_model_toe_is_adequate():
     assert min(moves) >= 0.005, moves
     d = diagnose(analysis)
     assert d.adequate_before and not d.accepted
+
+
+def test_two_effects_are_reported_from_the_final_joint_fit(tmp_path):
+    """I1's toe moved and I2 has a bias shift: both accepted, in two rounds; the verdict, diagnosis.md
+    and diagnosis.json give each parameter from the final joint fit, not from its round."""
+    import numpy as np
+
+    from geoback.diagnosis import write_diagnosis
+    from geoback.diagnosis.report import verdict
+    from geoback.identification import prepare
+    from geoback.simulate import synthetic_readings
+
+    loaded = load_case(CONCEALED / "toe-moved.yaml")
+    readings = synthetic_readings(loaded, refine=2.0, values={"B[I1]": 0.004, "bias[I2]": 4e-4}, noise_seed=3)
+    analysis = prepare(loaded)
+    analysis = analysis.with_readings(np.concatenate([readings[b.name] for b in analysis.simulation.survey.blocks]))
+    d = diagnose(analysis)
+    assert sorted(s.hypothesis.kind for s in d.accepted) == ["bias-shift", "integration-constant"]
+    assert d.causes["instrument"] and not d.causes["ground"]
+    final = dict(zip(d.final.parameters.names, d.final_fit.p))
+    first = d.accepted[0]
+    name = first.hypothesis.names[0]
+    i = first.reliability.names.index(name)
+    assert first.refit.p[i] != final[name]  # the round's number differs from the joint fit's
+    text = verdict(d)
+    assert "final joint fit" in text
+    write_diagnosis(d, tmp_path, plots=False)
+    data = json.loads((tmp_path / "diagnosis.json").read_text())
+    md = (tmp_path / "diagnosis.md").read_text()
+    for s, item in zip(d.accepted, data["missing"]):
+        for n in s.hypothesis.names:
+            assert item["estimates"][n]["estimate"] == final[n]
+            assert f"{n} = {final[n]:.4g}" in text and f"{n} = {final[n]:.4g}" in md
+    truth = {"B[I1]": 0.004, "bias[I2]": 4e-4}  # (one draw: within 3 sigma, not necessarily inside the 95 %)
+    for n, t in truth.items():
+        j = d.final.parameters.names.index(n)
+        assert abs(final[n] - t) < 3 * d.final.reliability.std[j]
+
+
+def test_deep_rigid_stratum_is_a_tentative_answer():
+    """A rigid stratum below 30 m: the boundary is found, but its modulus is not determined by the
+    readings, so the answer is tentative (said so), with an open profile-likelihood interval."""
+    import numpy as np
+    import yaml
+
+    from geoback.case import LoadedCase, case_from_data
+    from geoback.diagnosis.report import verdict
+    from geoback.identification import prepare
+    from geoback.simulate import synthetic_readings
+
+    loaded = load_case(CONCEALED / "null-1.yaml")
+    data = yaml.safe_load((CONCEALED / "null-1.yaml").read_text())
+    data["ground"]["layers"].append({"name": "rock", "top": 30.0, "E": 2.0e6, "nu": 0.3})
+    for ins in data["instruments"]:
+        ins.pop("readings_file", None)
+    truth = LoadedCase(case_from_data(data), loaded.path, {})
+    readings = synthetic_readings(truth, refine=2.0, noise_seed=7)
+    analysis = prepare(loaded)
+    analysis = analysis.with_readings(np.concatenate([readings[b.name] for b in analysis.simulation.survey.blocks]))
+    d = diagnose(analysis)
+    s = d.accepted[0]
+    assert s.hypothesis.kind == "layer-boundary" and not s.determined and d.rounds[0].tentative
+    prof = d.depth_profile(s)
+    assert prof.low <= 30.0 <= prof.high
+    assert d.open_ends("E[clay_below]") == (False, True)  # bounded below only
+    assert "TENTATIVE" in verdict(d)

@@ -70,7 +70,7 @@ def test_diagnosis_text_says_it(yielding):
     from geoback.diagnosis import diagnosis_text
 
     text = diagnosis_text(yielding)
-    assert "Missing physics: the ground yields around the tunnel" in text and "| nan" not in text
+    assert "Missing - Ground physics: the ground yields around the tunnel" in text and "| nan" not in text
 
 
 @pytest.mark.parametrize("name", ["null-1", "null-2", "null-3"])

@@ -54,6 +54,13 @@ TRUTH = {
     "toe-moved": ({"B[I1]": 0.004}, None, 10,
                   "inclinometer I1's toe moved 4 mm (integration constant B = 0.004 m) but was assumed fixed",
                   None),
+    "bias-shift": ({"bias[I2]": 4e-4}, None, 13,
+                   "inclinometer I2's probe has a bias shift of 0.4 mm/m (bias[I2] = 4e-4 rad on every slope "
+                   "reading), so its readings are off by 0.4 mm per metre from the toe (11 mm at the top station)",
+                   None),
+    "depth-offset": ({"zoff[I1]": 0.5}, None, 14,
+                     "inclinometer I1 was read 0.5 m deeper than recorded (zoff[I1] = 0.5 m: every station and "
+                     "the toe)", None),
     "stress-release": ({"beta": 0.7}, None, 12,
                        "only 70 % of the initial stress released before support (beta = 0.7); laboratory tests "
                        "give E = 10 MPa +/- 5 %, entered as a prior", {"mean": 10000.0, "std": 500.0}),

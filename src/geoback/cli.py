@@ -142,7 +142,8 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              vtu: bool = typer.Option(True, help="write the displacement/stress field as field.vtu"),
              set_: list[str] = typer.Option([], "--set", help="NAME=VALUE with the case's names and units (repeatable): "
                                             "E[clay]=12 MPa, Egrad[clay]=400, n[clay]=1.5, K0grad=0.05, beta=0.7, "
-                                            "B[I1]=4 mm, zsplit[clay]=15 with Esplit[clay]=25 MPa"),
+                                            "B[I1]=4 mm, zsplit[clay]=15 with Esplit[clay]=25 MPa; an inclinometer's bias "
+                                            "shift bias[I1]=0.2 mrad or depth offset zoff[I1]=300 mm"),
              refine: Optional[float] = typer.Option(None, help="mesh this many times finer than the case says "
                                                     "(default 2 for study data, 1 for a forward run)"),
              noise: bool = typer.Option(False, "--noise", help="add noise drawn from each instrument's C_x"),

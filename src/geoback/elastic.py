@@ -57,6 +57,8 @@ class _Load:
 class ElasticSimulation(Simulation):
     """A case meshed and assembled, predicting readings of its instruments for any values."""
 
+    reads_depth_offsets = True
+
     def __init__(self, loaded: LoadedCase, mesh: Mesh | None = None, blocks: list[InstrumentBlock] | None = None,
                  extensions: Mapping | None = None, backend: str | None = None):
         case = loaded.case
@@ -154,7 +156,8 @@ class ElasticSimulation(Simulation):
 
     def _readings(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
         st, fact, s, coords, f, u = self._forward(values)  # f: the load (a _Load)
-        x = self.survey.P @ u
+        P = self.survey.operator(values)  # read at the inclinometers' depth offsets, if any
+        x = P @ u
         if not wrt:
             return Prediction(x)
         du = np.empty((self.fe.nfree, len(wrt)))
@@ -176,7 +179,7 @@ class ElasticSimulation(Simulation):
             du[:, cols] = self._solve(fact, s, rhs, np.column_stack([c for _, _, _, c in keyed]))
         if raw:
             du[:, [j for j, _ in raw]] = self._solve(fact, s, np.column_stack([r for _, r in raw]))
-        return Prediction(x, np.asarray(self.survey.P @ du))
+        return Prediction(x, np.asarray(P @ du))
 
     # ------------------------------------------------------------------ fields
     def element_stress(self, values: Mapping, u_full: np.ndarray) -> np.ndarray:

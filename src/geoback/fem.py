@@ -309,14 +309,22 @@ class FEModel:
                 break
         return xi
 
-    def interpolation(self, points: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-        """Sparse operators (npts x nfree) giving ux and uy at points by shape functions."""
+    def interpolation(self, points: np.ndarray, derivative: int | None = None) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+        """Sparse operators (npts x nfree) giving ux and uy at points by shape functions; with
+        `derivative` (0: x, 1: y) their partial derivatives d ux / d x_derivative, d uy / d x_derivative
+        instead (the gradient of the element's interpolant: exact, but discontinuous across element
+        edges as the P2 field's gradient is)."""
         elem, ref = self.locate(points)
         if np.any(elem < 0):
-            bad = np.asarray(points)[elem < 0][0]
+            bad = np.atleast_2d(np.asarray(points))[elem < 0][0]
             raise ValueError(f"point ({bad[0]:g}, {bad[1]:g}) lies outside the meshed ground")
-        N, _ = _ref_basis(self.element, ref.T)  # (nb, n)
+        N, dN = _ref_basis(self.element, ref.T)  # (nb, n), (nb, 2, n)
         nodes = self.tri[elem]  # (n, nb)
+        if derivative is not None:  # dN/dx_d = sum_r dN/dxi_r dxi_r/dx_d (isoparametric map)
+            coords = self.nodes[nodes]  # (n, nb, 2)
+            J = np.einsum("enx,nre->exr", coords, dN)  # d x_x / d xi_r
+            inv = np.linalg.inv(J)  # (n, r, x): d xi_r / d x_x
+            N = np.einsum("nre,er->ne", dN, inv[:, :, derivative])
         rows = np.repeat(np.arange(len(elem)), nodes.shape[1])
         ops = []
         for comp in (0, 1):

@@ -20,6 +20,14 @@ from .case import Case, LoadedCase
 LINEWISE = {"inclinometer": "inclinometer", "sliding_micrometer": "sliding_micrometer",
             "extensometer": "sliding_micrometer", "deflectometer": "deflectometer"}
 CONSTANT_STEMS = ("A", "B", "C", "D")
+# Systematic errors of an inclinometer (named with the instrument: bias[I1], zoff[I1]); zero when not
+# identified. bias: a constant offset of every primary reading (slope, rad), so the integrated
+# readings carry bias * L_n, L_n the distance of station n from the reference end (eqn 15 with
+# alpha_i + bias); zoff: the probe's depth positions shifted by zoff (m, positive deeper), so every
+# sampling point (the reference end's too) is read zoff deeper. The observation operator is then
+# built at the shifted points (exact, not a first-order correction), and dx/d zoff is the depth
+# derivative of the FE interpolant there (the gradient of the element's shape functions).
+ERROR_STEMS = {"bias": "rad", "zoff": "m"}
 
 
 @dataclass(frozen=True)
@@ -195,19 +203,60 @@ def case_blocks(loaded: LoadedCase) -> list[InstrumentBlock]:
     return blocks
 
 
+def is_instrument_error(name: str) -> bool:
+    """Systematic-error terms of an inclinometer: bias[I1], zoff[I1]."""
+    return name.split("[")[0] in ERROR_STEMS and name.endswith("]")
+
+
 @dataclass
 class Survey:
-    """All instruments stacked: x = P u - G c (eqn 9's block structure, one row per reading)."""
+    """All instruments stacked: x = P u - G c (eqn 9's block structure, one row per reading), plus
+    the inclinometers' systematic errors (``ERROR_STEMS``): x += E b for the bias shifts b, and the
+    depth offsets, with which P is read at shifted points (``operator``).
+
+    P holds the m reading rows; ``operator(values)`` stacks below them the rows D of the depth
+    derivatives dx/dz of every inclinometer's readings (``depth_rows``): a physics that reads depth
+    offsets (``Simulation.reads_depth_offsets``) computes ``operator(values) @ u`` and
+    ``operator(values) @ du/dv`` and `Simulation.predict` splits them, so a depth offset costs no
+    solve and its sensitivity D u is exact. An inclinometer read at several construction stages
+    has one bias shift over all its surveys and no depth offset."""
 
     blocks: list[InstrumentBlock]
-    P: sp.csr_matrix  # m x nfree
+    P: sp.csr_matrix  # m x nfree, at zero depth offsets
     G: np.ndarray  # m x k
     constant_names: list[str]
     labels: list[Reading]
+    error_names: list[str] = field(default_factory=list)  # bias[I1], zoff[I1], ... (inclinometers)
+    bias_columns: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # m x (number of bias names)
+    depth_rows: dict = field(default_factory=dict)  # zoff[I1] -> (its reading rows, its rows of P beyond m)
+    fe: object = None  # what P interpolates on (``interpolation(points, derivative)``), to read elsewhere
+    D: sp.csr_matrix | None = None  # the depth-derivative rows (``depth_rows``), at zero depth offsets
+    _shifted: dict = field(default_factory=dict, repr=False)
 
     @property
     def m(self) -> int:
-        return self.P.shape[0]
+        return len(self.labels)
+
+    def offsets(self, values) -> tuple:
+        """The depth offsets set in `values`, (name, metres) for every non-zero one, sorted."""
+        return tuple(sorted((n, float(np.real(values[n]))) for n in self.depth_rows if values.get(n, 0) != 0))
+
+    def operator(self, values) -> sp.csr_matrix:
+        """[P; D] with every inclinometer read at its depth offset in `values`: the instruments'
+        sampling points moved zoff deeper, interpolated anew (a few remembered)."""
+        key = self.offsets(values)
+        if key not in self._shifted:
+            if not key:
+                full = self.P if self.D is None or self.D.shape[0] == 0 else sp.vstack([self.P, self.D]).tocsr()
+            else:
+                shift = dict(key)
+                blocks = [replace(b, points=b.points - np.array([0.0, shift.get(f"zoff[{b.name}]", 0.0)]))
+                          for b in self.blocks]
+                if len(self._shifted) >= 8:
+                    self._shifted.pop(next(k for k in self._shifted if k))
+                full = _operator(blocks, self.fe)[0]
+            self._shifted[key] = full
+        return self._shifted[key]
 
     def rows(self, name: str) -> slice:
         """Rows of an instrument's readings."""
@@ -221,6 +270,16 @@ class Survey:
     def constant_column(self, name: str) -> np.ndarray:
         """d x / d c for an integration constant c (eqns 11, 15, 18): -G[:, c]."""
         return -self.G[:, self.constant_names.index(name)]
+
+    def bias_column(self, name: str) -> np.ndarray:
+        """d x / d bias for an inclinometer's bias shift: L_n at its stations, 0 elsewhere."""
+        return self.bias_columns[:, [n for n in self.error_names if n.startswith("bias[")].index(name)]
+
+
+def bias_shift_column(block: InstrumentBlock) -> np.ndarray:
+    """Displacement error of a linewise instrument's readings per unit offset of every primary
+    reading: W 1 (eqns 11, 15, 18), for an inclinometer L_n, the distance from the reference end."""
+    return block.integration @ np.ones(len(block.lengths))
 
 
 def stage_constants(blocks: list[InstrumentBlock]) -> list[InstrumentBlock]:
@@ -238,26 +297,65 @@ def stage_constants(blocks: list[InstrumentBlock]) -> list[InstrumentBlock]:
     return out
 
 
-def build_survey(blocks: list[InstrumentBlock], fe) -> Survey:
-    """The observation operator of `blocks` on the FE model `fe` (shape-function interpolation)."""
-    blocks = stage_constants(blocks)
+def _operator(blocks: list[InstrumentBlock], fe) -> tuple[sp.csr_matrix, dict]:
+    """[P; D]: the readings' interpolation and, below it, the depth derivative of every
+    inclinometer's readings (read zoff deeper: d/d zoff u(x, y - zoff) = -du/dy); and where D's
+    rows are (zoff[I1] -> (reading rows, rows of D))."""
     all_pts = np.vstack([b.points for b in blocks])
     Ix, Iy = fe.interpolation(all_pts)
-    rows, Gs, names, labels = [], [], [], []
-    offset = 0
+    incl = any(b.kind == "inclinometer" for b in blocks)
+    Dx, Dy = fe.interpolation(all_pts, derivative=1) if incl else (None, None)  # d u / d y
+    rows, extra, depth_rows = [], [], {}
+    m = sum(b.m for b in blocks)
+    surveys = _survey_count(blocks)
+    offset = r0 = 0
     for b in blocks:
         n = len(b.points)
         wx = sp.csr_matrix(b.weights[:, :, 0])
         wy = sp.csr_matrix(b.weights[:, :, 1])
         rows.append(wx @ Ix[offset:offset + n] + wy @ Iy[offset:offset + n])
+        if b.kind == "inclinometer" and surveys[b.name] == 1:
+            start = m + sum(r.shape[0] for r in extra)
+            extra.append(-(wx @ Dx[offset:offset + n] + wy @ Dy[offset:offset + n]))
+            depth_rows[f"zoff[{b.name}]"] = (slice(r0, r0 + b.m), slice(start, start + b.m))
         offset += n
+        r0 += b.m
+    return sp.vstack(rows + extra).tocsr(), depth_rows
+
+
+def _survey_count(blocks: list[InstrumentBlock]) -> dict[str, int]:
+    """How many surveys (construction stages) of each instrument `blocks` hold."""
+    count: dict[str, int] = {}
+    for b in blocks:
+        count[b.name] = count.get(b.name, 0) + 1
+    return count
+
+
+def build_survey(blocks: list[InstrumentBlock], fe) -> Survey:
+    """The observation operator of `blocks` on the FE model `fe` (shape-function interpolation),
+    with the depth-derivative rows and bias columns of every inclinometer (``Survey``)."""
+    blocks = stage_constants(blocks)
+    full, depth_rows = _operator(blocks, fe)
+    Gs, names, labels = [], [], []
+    error_names, bias_cols = [], {}
+    surveys = _survey_count(blocks)
+    m = sum(b.m for b in blocks)
+    r0 = 0
+    for b in blocks:
+        if b.kind == "inclinometer":
+            bias = f"bias[{b.name}]"
+            if bias not in bias_cols:
+                bias_cols[bias] = np.zeros(m)
+                error_names += [bias] + ([f"zoff[{b.name}]"] if surveys[b.name] == 1 else [])
+            bias_cols[bias][r0:r0 + b.m] = bias_shift_column(b)
+        r0 += b.m
         Gs.append(b.constants)
         names += b.constant_names
         labels += b.labels
-    P = sp.vstack(rows).tocsr()
-    G = np.zeros((P.shape[0], len(names)))
+    G = np.zeros((m, len(names)))
     r0, c0 = 0, 0
     for g in Gs:
         G[r0:r0 + g.shape[0], c0:c0 + g.shape[1]] = g
         r0, c0 = r0 + g.shape[0], c0 + g.shape[1]
-    return Survey(blocks, P, G, names, labels)
+    E = np.column_stack(list(bias_cols.values())) if bias_cols else np.zeros((m, 0))
+    return Survey(blocks, full[:m], G, names, labels, error_names, E, depth_rows, fe, full[m:])

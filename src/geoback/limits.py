@@ -25,6 +25,8 @@ POISSON = Limits(0.0, 0.4999, (0.05, 0.4995))
 EARTH_PRESSURE = Limits(1e-3, 10.0, (0.25, 3.0))
 CONSTANT_LENGTH = Limits(-10.0, 10.0, (-0.5, 0.5))  # m: an instrument's reference end moved
 CONSTANT_ANGLE = Limits(-1.0, 1.0, (-0.05, 0.05))  # rad: a deflectometer's reference end rotated
+BIAS_SHIFT = Limits(-0.05, 0.05, (-2e-3, 2e-3))  # rad: an inclinometer's constant slope offset per reading
+DEPTH_OFFSET = Limits(-3.0, 3.0, (-0.5, 0.5))  # m: an inclinometer probe's depth positions shifted
 # Mohr-Coulomb strength (kPa, degrees): refused outside [lo, hi], unusual for ground outside `plausible`
 COHESION = Limits(0.0, 1e6, (0.0, 500.0))
 FRICTION = Limits(0.01, 69.99, (15.0, 45.0))  # the schema takes 0 < phi < 70

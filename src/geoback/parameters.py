@@ -13,10 +13,11 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .errors import GeobackError
-from .limits import CONSTANT_ANGLE, CONSTANT_LENGTH
+from .instruments import ERROR_STEMS, is_instrument_error
+from .limits import BIAS_SHIFT, CONSTANT_ANGLE, CONSTANT_LENGTH, DEPTH_OFFSET
 from .simulation import Simulation, is_constant
 
-UNITS = {"A": "m", "B": "m", "C": "rad", "D": "m"}
+UNITS = {"A": "m", "B": "m", "C": "rad", "D": "m", **ERROR_STEMS}
 
 
 @dataclass(frozen=True)
@@ -61,7 +62,26 @@ def parameter_limits(simulation: Simulation, name: str, values: Mapping):
     """Allowed and usual range of a parameter (``limits.Limits``)."""
     if is_constant(name):
         return CONSTANT_ANGLE if name[0] == "C" else CONSTANT_LENGTH
+    if is_instrument_error(name):
+        return BIAS_SHIFT if name.startswith("bias[") else DEPTH_OFFSET
     return simulation.limits(name, values)
+
+
+def _instrument_term(name: str, simulation: Simulation) -> tuple[str, str] | None:
+    """(name, unit) of an instrument's integration constant or systematic error; None if `name` is
+    not one; GeobackError if the survey has no such term."""
+    if is_constant(name):
+        known = simulation.survey.constant_names
+        what = "integration constants"
+    elif is_instrument_error(name):
+        known = simulation.survey.error_names
+        what = "systematic errors (inclinometers' bias and zoff)"
+    else:
+        return None
+    if name not in known:
+        raise GeobackError(f"unknown name '{name}': the instruments' {what} are "
+                           f"{', '.join(known) or 'none'}")
+    return name, UNITS[name.split("[")[0]]
 
 
 def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = None,
@@ -87,6 +107,11 @@ def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = No
             if p.name not in constants:
                 raise error(i, f"'{p.name}': no linewise instrument has this integration constant")
             name = p.name
+        elif is_instrument_error(p.name):
+            if p.name not in simulation.survey.error_names:
+                raise error(i, f"'{p.name}': no inclinometer has this systematic error (known: "
+                               f"{', '.join(simulation.survey.error_names) or 'none'})")
+            name = p.name
         else:
             name = simulation.canonical(p.name)
             if name is None:
@@ -102,9 +127,11 @@ def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = No
                            "list each parameter once")
         canonical.append(name)
     # ranges that depend on other quantities (n's limit on nu) are those at the initial values
-    start = {**base, **{name: p.initial for name, p in zip(canonical, specs) if not is_constant(name)}}
+    start = {**base, **{name: p.initial for name, p in zip(canonical, specs)
+                         if not (is_constant(name) or is_instrument_error(name))}}
     for i, (p, name) in enumerate(zip(specs, canonical)):
-        unit = UNITS[name[0]] if is_constant(name) else simulation.unit(name)
+        unit = (UNITS[name.split("[")[0]] if is_constant(name) or is_instrument_error(name)
+                else simulation.unit(name))
         lim = parameter_limits(simulation, name, start)
         span = f"{lim.lo:g} to {lim.hi:g}" + (f" {unit}" if unit not in ("-", "") else "")
         if not lim.contains(p.initial):
@@ -187,11 +214,9 @@ def resolve_values(simulation: Simulation, assignments: Mapping[str, object]) ->
     out: dict[str, float] = {}
     base = dict(simulation.quantities())
     for raw, text in assignments.items():
-        if is_constant(raw):
-            if raw not in simulation.survey.constant_names:
-                known = ", ".join(simulation.survey.constant_names) or "none (no linewise instrument)"
-                raise GeobackError(f"unknown name '{raw}': the instruments' integration constants are {known}")
-            name, unit = raw, UNITS[raw[0]]
+        term = _instrument_term(raw, simulation)
+        if term is not None:
+            name, unit = term
         else:
             name = simulation.canonical(raw)
             if name is None:

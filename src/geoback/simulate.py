@@ -115,10 +115,12 @@ def synthetic_readings(loaded: LoadedCase, refine: float = 2.0, values: Mapping 
     """Readings of every instrument from a finer mesh, optionally with noise drawn from C_x.
 
     `values` overrides named quantities, by name as in a case file, with units if wished (e.g.
-    {'Egrad[clay]': 500, 'E': '12 MPa', 'B[I1]': 0.002}); unknown names are refused. Noise is L z
-    with C_x = L L^t per instrument (eqn 10), seeded, independent from stage to stage. Returns
-    {instrument: readings} at the last construction stage, or with `by_stage` {instrument: {stage:
-    readings}} at every stage."""
+    {'Egrad[clay]': 500, 'E': '12 MPa', 'B[I1]': 0.002}); unknown names are refused. An
+    inclinometer's bias shift ('bias[I1]': 2e-4 rad) adds bias * L_n to its readings; its depth
+    offset ('zoff[I1]': '300 mm') reads its stations and reference end that much deeper (the
+    observation operator at the shifted points). Noise is L z with C_x = L L^t per instrument
+    (eqn 10), seeded, independent from stage to stage. Returns {instrument: readings} at the last
+    construction stage, or with `by_stage` {instrument: {stage: readings}} at every stage."""
     fine = loaded.with_case(refined_case(loaded.case, refine))
     analysis = prepare(fine, parameters=[], with_readings=False)
     sim = analysis.simulation

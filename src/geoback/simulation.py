@@ -20,7 +20,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .instruments import CONSTANT_STEMS, Survey, build_survey
+from .instruments import CONSTANT_STEMS, Survey, build_survey, is_instrument_error
 
 
 @dataclass
@@ -66,6 +66,12 @@ def is_constant(name: str) -> bool:
     return name.split("[")[0] in CONSTANT_STEMS and name.endswith("]")
 
 
+def is_instrument_term(name: str) -> bool:
+    """Names the survey owns rather than the physics: integration constants (A[X1], B[I1], ...) and
+    inclinometers' systematic errors (bias[I1], zoff[I1])."""
+    return is_constant(name) or is_instrument_error(name)
+
+
 class Simulation(ABC):
     """Readings of a survey and their sensitivities at named values (see the module docstring).
 
@@ -76,6 +82,7 @@ class Simulation(ABC):
 
     loaded: object  # the LoadedCase it was built from
     survey: Survey
+    reads_depth_offsets: bool = False  # _readings observes with survey.operator(values) (zoff[I1] available)
     counters: Counters
     timings: dict
     mesh: object
@@ -111,7 +118,7 @@ class Simulation(ABC):
 
     def known_names(self) -> list[str]:
         """Examples of valid names, for messages."""
-        return sorted(self.quantities()) + list(self.survey.constant_names)
+        return sorted(self.quantities()) + list(self.survey.constant_names) + list(self.survey.error_names)
 
     # ------------------------------------------------------------------ predictions
     @abstractmethod
@@ -143,22 +150,42 @@ class Simulation(ABC):
         return None
 
     def predict(self, values: Mapping, wrt: Sequence[str] = (), sensitivities: bool = False) -> Prediction:
-        """Readings at `values` (constants A-D default to 0); with `sensitivities`, A = dx/d(wrt)."""
-        physical = [n for n in wrt if not is_constant(n)] if sensitivities else []
+        """Readings at `values` (constants A-D and the inclinometers' bias and zoff default to 0);
+        with `sensitivities`, A = dx/d(wrt).
+
+        The physics computes every row of ``survey.operator(values)`` (the readings, read at the
+        inclinometers' depth offsets, and below them their depth derivatives D u); here
+        x = P u - G c + E b, dx/d zoff = D u (exact)."""
+        survey = self.survey
+        physical = [n for n in wrt if not is_instrument_term(n)] if sensitivities else []
+        if not self.reads_depth_offsets and (survey.offsets(values) or any(n in survey.depth_rows for n in wrt)):
+            raise NotImplementedError(f"{type(self).__name__} does not read the survey at depth offsets: "
+                                      f"inclinometer depth offsets (zoff) are not available with it")
         pred = self._readings(values, physical)
-        x = pred.x
+        m = survey.m
+        x = pred.x[:m]
+        A_phys = pred.A[:m] if sensitivities and pred.A is not None else None
         for name, v in values.items():
-            if is_constant(name) and v != 0:
-                x = x - self.survey.G[:, self.survey.constant_names.index(name)] * v
+            if v == 0:
+                continue
+            if is_constant(name):
+                x = x - survey.G[:, survey.constant_names.index(name)] * v
+            elif name.startswith("bias[") and name in survey.error_names:
+                x = x + survey.bias_column(name) * v
         if not sensitivities:
             return Prediction(x)
         A = np.zeros((len(x), len(wrt)))
         k = 0
         for j, name in enumerate(wrt):
             if is_constant(name):
-                A[:, j] = self.survey.constant_column(name)
+                A[:, j] = survey.constant_column(name)
+            elif name in survey.depth_rows:
+                rows, extra = survey.depth_rows[name]
+                A[rows, j] = pred.x[extra]
+            elif is_instrument_error(name):
+                A[:, j] = survey.bias_column(name)
             else:
-                A[:, j] = pred.A[:, k]
+                A[:, j] = A_phys[:, k]
                 k += 1
         return Prediction(x, A)
 

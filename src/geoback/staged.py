@@ -89,6 +89,8 @@ class _Solution:
 class StagedSimulation(LinedSystem, ElasticSimulation):
     """A case with a construction section: stages, an optional lining, readings at every stage."""
 
+    reads_depth_offsets = False  # it observes with survey.P alone: no inclinometer depth offsets (zoff)
+
     def __init__(self, loaded: LoadedCase, mesh: Mesh | None = None, blocks: list[InstrumentBlock] | None = None,
                  extensions: Mapping | None = None, backend: str | None = None):
         self.plan = StagePlan.of(loaded.case)

@@ -7,7 +7,7 @@ knows the individual rows.
 | name           | null value       | unit  | what it changes                                             |
 |----------------|------------------|-------|-------------------------------------------------------------|
 | Egrad[layer]   | 0                | kPa/m | E = E_top + Egrad (depth - top) inside the layer            |
-| Esplit[layer]  | E[layer]         | kPa   | E below depth zsplit[layer] inside the layer                |
+| Esplit[layer]  | E[layer]         | kPa   | E below depth zsplit[layer] inside the layer (a step added) |
 | zsplit[layer]  | the layer bottom | m     | depth of that unmodelled boundary (fixed by search, not fit)|
 | n[layer]       | 1                | -     | cross-anisotropy E_h / E_v                                  |
 | m[layer]       | 1                | -     | G_vh / (E_v / (2 (1 + nu)))                                 |
@@ -31,11 +31,13 @@ def _gradient(f, value, ground, i, values):
 
 
 def _split(f, value, ground, i, values):
+    """E below zsplit: Esplit, as a step of Esplit - E[layer] on whatever else sets E there (a
+    gradient), so that Esplit = E[layer] is the model without the boundary whatever the order."""
     z = values.get(f"zsplit[{ground.layers[i]}]")
     if z is None:
         return
     below = (f.element_layer == i) & (f.element_depth > np.real(z))
-    f.E[below] = value
+    f.E[below] = f.E[below] + (value - values[f"E[{ground.layers[i]}]"])
 
 
 def _ratio(attr):

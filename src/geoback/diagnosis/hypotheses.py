@@ -28,6 +28,11 @@ class Hypothesis:
     def names(self) -> list[str]:
         return [p.name for p in self.parameters]
 
+    @property
+    def cause(self) -> str:
+        """'instrument' (error of an instrument) or 'ground' (physics the ground model lacks)."""
+        return cause_of(self.kind)
+
 
 KINDS = {
     "stiffness-gradient": "modulus increasing linearly with depth",
@@ -36,9 +41,21 @@ KINDS = {
     "K0-gradient": "K0 varying with depth",
     "integration-constant": "a linewise instrument's reference end moved (integration constant not zero)",
     "stress-release": "only part of the initial stress released before support (beta < 1)",
+    "bias-shift": "an inclinometer's readings carry a constant slope offset (error growing along the casing)",
+    "depth-offset": "an inclinometer's probe was read at depths shifted from those recorded",
     "release-before-lining": "more (or less) stress released before the lining than assumed",
     "lining-stiffness": "a stiffer or softer lining than assumed",
 }
+
+# What a kind of hypothesis blames: the instruments (their reference, their systematic errors) or the
+# ground model. A kind not listed here is ground physics.
+INSTRUMENT_KINDS = frozenset({"integration-constant", "bias-shift", "depth-offset"})
+CAUSES = {"instrument": "instrument error", "ground": "ground physics"}
+
+
+def cause_of(kind: str) -> str:
+    """'instrument' or 'ground' (see ``INSTRUMENT_KINDS``)."""
+    return "instrument" if kind in INSTRUMENT_KINDS else "ground"
 
 
 def _param(name: str, initial: float, lo: float, hi: float) -> Parameter:
@@ -94,7 +111,11 @@ def candidate_hypotheses(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
     constants: dict[str, list[str]] = {}  # an instrument read at several stages: every survey's constants
     for block in misfit.data.blocks:
         constants.setdefault(block.name, []).extend(block.constant_names)
+    errors = set(misfit.simulation.survey.error_names)
+    if not getattr(misfit.simulation, "reads_depth_offsets", False):
+        errors = {n for n in errors if not n.startswith("zoff[")}
     for block in {b.name: b for b in misfit.data.blocks}.values():
+        out += _instrument_error_hypotheses(block, case, errors - baseline)
         names = [n for n in constants[block.name] if n not in baseline]
         if not names:
             continue
@@ -105,6 +126,52 @@ def candidate_hypotheses(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
             f"The reference end of {block.kind} '{block.name}' was assumed fixed but moved "
             f"(integration constant{'s' if len(names) > 1 else ''} {', '.join(names)} of eqns 11/15/18).",
             [_param(n, 0.0, -1.0, 1.0) for n in names]))
+    return out
+
+
+MAX_DEPTH_OFFSET = 2.0  # m: larger depth offsets are searched for no further
+
+
+def depth_offset_range(block, case) -> tuple[float, float]:
+    """How far an inclinometer's sampling points (stations and reference end) can be read deeper
+    (positive) or shallower while staying in the ground, out of the tunnel, within 2 m."""
+    g = case.geometry
+    lo, hi = -MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET
+    margin = 1e-3 * g.depth
+    for x, y in block.points:
+        lo = max(lo, y + margin)  # y - zoff <= -margin  (zoff < 0 moves up)
+        hi = min(hi, y + g.depth - margin)
+        dx = abs(x)
+        if dx < g.radius * 1.05:  # the vertical through the point meets the tunnel: stop short of it
+            half = np.sqrt(max((g.radius * 1.05) ** 2 - dx * dx, 0.0))
+            top, bottom = -g.axis_depth + half, -g.axis_depth - half
+            if y >= top:
+                hi = min(hi, y - top)
+            elif y <= bottom:
+                lo = max(lo, y - bottom)
+    return float(lo), float(hi)
+
+
+def _instrument_error_hypotheses(block, case, available: set) -> list[Hypothesis]:
+    """An inclinometer's systematic errors (instruments.ERROR_STEMS) as hypotheses."""
+    out = []
+    bias, zoff = f"bias[{block.name}]", f"zoff[{block.name}]"
+    end = "toe" if block.stations[0][1] < block.stations[-1][1] else "head"
+    if bias in available:
+        out.append(Hypothesis(
+            f"bias-shift[{block.name}]", "bias-shift", f"inclinometer {block.name}: bias shift",
+            f"Every reading of inclinometer '{block.name}' carries the same slope offset (a probe bias shift "
+            f"between surveys), so its displacements are in error by bias x the distance from the {end}, "
+            f"growing along the casing.",
+            [_param(bias, 0.0, -0.01, 0.01)]))
+    if zoff in available:
+        lo, hi = depth_offset_range(block, case)
+        if hi - lo > 0.05:
+            out.append(Hypothesis(
+                f"depth-offset[{block.name}]", "depth-offset", f"inclinometer {block.name}: depth offset",
+                f"The probe of inclinometer '{block.name}' was read at depths shifted from those recorded "
+                f"(zoff > 0: deeper), so each reading is the movement at another depth.",
+                [_param(zoff, 0.0, lo, hi)]))
     return out
 
 

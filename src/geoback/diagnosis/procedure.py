@@ -9,10 +9,22 @@
    the baseline parameters cannot mimic; S ~ chi^2(k) if the extension is absent. An extension
    whose sensitivity lies in the baseline's span cannot be identified together with it: said so.
 4. Refit the most promising; likelihood-ratio test dJ ~ chi^2(k), AIC, BIC; accept the best
-   significant one (Bonferroni over the hypotheses refitted); look once more; stop when adequate
-   or nothing more is significant. Hypotheses that no score test can rank (yielding: at an elastic
-   state every sensitivity to the strength is zero; ``yielding.py``) are screened instead and
-   refitted whenever the model is not adequate, in the same Bonferroni family.
+   significant one (Bonferroni over the hypotheses refitted) whose extra parameters the readings
+   determine (a significant hypothesis with an undetermined parameter, e.g. a deep stratum of
+   unbounded modulus, is accepted only when nothing determined is, and then as tentative); look
+   once more; stop when adequate or nothing more is significant. A layer boundary's depth is
+   profiled over a continuous depth (``depth.py``). Hypotheses that no score test can rank
+   (yielding: at an elastic state every sensitivity to the strength is zero; ``yielding.py``) are
+   screened instead and refitted whenever the model is not adequate, in the same Bonferroni family.
+5. Compare (``compare.py``): Akaike weights of the refitted hypotheses and of the model without
+   them; a rival within 2 AIC of the accepted one is reported with the readings that would tell
+   them apart; the size of effect each score test could have detected.
+6. Report every accepted parameter from the final joint fit (profile-likelihood intervals where
+   the linearised ones are not reliable); a boundary depth accepted before another effect is
+   profiled again in the final model.
+
+Causes: hypotheses blame either an instrument (its reference end moved, a bias shift, a depth
+offset: ``hypotheses.INSTRUMENT_KINDS``) or the ground model (every other kind).
 
 Error scales (the case's ``error_scales``, scales.py). A free scale must not explain a mismatch
 away, so:
@@ -46,14 +58,17 @@ from ..estimate import Fit, Settings, fit
 from ..identification import Identification, conclude
 from ..misfit import Misfit
 from ..reliability import Reliability, chi2_sf
-from ..simulation import is_constant
+from ..simulation import is_instrument_term
 from . import yielding
+from .compare import EQUAL_AIC, akaike_weights, detectable_lambda, separation
+from .depth import DepthProfile, profile_depth
 from .hypotheses import Hypothesis, candidate_hypotheses
 
 COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mimic
 DEPTH_SEEDS = 7  # layer-boundary depths refitted evenly over a layer before bisection
 REFIT_ITERATIONS = 100
 STALLED = 0.01  # a refit whose J fell by less than this in its last step has stopped moving
+LOSING = 50.0  # J units: a boundary whose best seed depth is this far above another refit is not refined
 
 
 @dataclass
@@ -82,6 +97,16 @@ class Scored:
     aic: float = float("nan")
     bic: float = float("nan")
     misfit: Misfit | None = None  # the baseline extended with the hypothesis
+    m2_norms: np.ndarray | None = None  # per extra parameter: the whitened sensitivity the baseline cannot mimic
+    detectable: dict = field(default_factory=dict)  # parameter -> |change| the score test catches with 80 %
+    determined: bool = True  # the readings determine every extra parameter of the refit (caveats.py)
+    caveats: list = field(default_factory=list)  # the refit's caveats on its extra parameters
+    profile: DepthProfile | None = None  # a layer boundary's depth profile
+    weight: float = float("nan")  # Akaike weight in its round
+
+    @property
+    def settled(self) -> bool:
+        return self.refit is not None and _settled(self.refit)
 
 
 @dataclass
@@ -96,6 +121,14 @@ class Round:
     threshold: float = float("nan")  # per-hypothesis level alpha / K (Bonferroni over the library)
     scales: list = field(default_factory=list)  # scales.ScaleEstimate of every group at this round's fit
     scale_threshold: float = float("nan")  # per-scale level alpha / G (Bonferroni over the estimated scales)
+    aic: float = float("nan")  # of the round's model (no hypothesis added)
+    weights: dict = field(default_factory=dict)  # Akaike weights: hypothesis key (or NO_ADDITION) -> weight
+    rival: Scored | None = None  # a hypothesis within 2 AIC of the accepted one
+    separation: object = None  # compare.Separation of the accepted one and its rival
+    tentative: bool = False  # accepted although an extra parameter is not determined
+
+
+NO_ADDITION = "(no addition)"
 
 
 @dataclass
@@ -107,6 +140,10 @@ class Diagnosis:
     final: Identification  # the model with every accepted extension, fitted
     final_misfit: Misfit
     accepted: list[Scored] = field(default_factory=list)
+    final_profiles: dict = field(default_factory=dict)  # key -> DepthProfile re-profiled in the final model
+    seconds: float = float("nan")
+    final_intervals: dict = field(default_factory=dict)  # name -> (low, high, low open, high open): profile-
+    # likelihood intervals of accepted parameters the final identification did not profile (at a bound)
 
     @property
     def baseline_fit(self) -> Fit:
@@ -131,6 +168,46 @@ class Diagnosis:
     @property
     def adequate_after(self) -> bool:
         return self.rounds[-1].adequate
+
+    def estimates(self, s: Scored) -> list[tuple[str, float, float, float, float]]:
+        """(name, estimate, std, 95 % low, 95 % high) of an accepted hypothesis' parameters from the
+        FINAL joint fit (profile-likelihood intervals where the linearised ones are unreliable; a
+        profiled boundary's modulus with its depth profiled out too)."""
+        fin = self.final
+        lo, hi = fin.intervals95()
+        names = list(fin.parameters.names)
+        prof = self.depth_profile(s)
+        out = []
+        for name in s.hypothesis.names:
+            if name not in names:
+                continue
+            i = names.index(name)
+            a, b = float(lo[i]), float(hi[i])
+            if name in self.final_intervals:
+                a, b = self.final_intervals[name][:2]
+            if prof is not None:
+                a2, b2 = prof.modulus_interval(name, (a, b))
+                a, b = min(a, a2), max(b, b2)
+            out.append((name, float(self.final_fit.p[i]), float(fin.reliability.std[i]), a, b))
+        return out
+
+    def open_ends(self, name: str) -> tuple[bool, bool]:
+        """Whether the 95 % interval of an accepted parameter reaches a limit the readings do not
+        move it from (a profile-likelihood interval open at that end)."""
+        got = self.final_intervals.get(name) or self.final.profiled.get(name)
+        return (bool(got[2]), bool(got[3])) if got else (False, False)
+
+    def depth_profile(self, s: Scored) -> DepthProfile | None:
+        """The depth profile of an accepted boundary in the final model (or its round's)."""
+        return self.final_profiles.get(s.hypothesis.key, s.profile)
+
+    @property
+    def causes(self) -> dict[str, list[Scored]]:
+        """The accepted hypotheses by cause: 'instrument' and 'ground'."""
+        out = {"instrument": [], "ground": []}
+        for s in self.accepted:
+            out[s.hypothesis.cause].append(s)
+        return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -253,14 +330,16 @@ def score_hypotheses(misfit: Misfit, p_hat: np.ndarray, hypotheses: list[Hypothe
             continue
         coef = np.linalg.lstsq(M2, r, rcond=None)[0]
         S = float(np.sum((M2 @ coef) ** 2))
-        out.append(Scored(h, S, k, chi2_sf(S, k), J0=J0, misfit=ext))
+        out.append(Scored(h, S, k, chi2_sf(S, k), J0=J0, misfit=ext, m2_norms=np.linalg.norm(M2, axis=0)))
     return out
 
 
 def _modelled(misfit: Misfit, h: Hypothesis) -> bool:
-    """Can the misfit's simulation take the hypothesis' parameters (yielding ground has no anisotropy)?"""
+    """Can the misfit's simulation take the hypothesis' parameters (yielding ground has no anisotropy)?
+    The survey's own terms (integration constants, an inclinometer's bias and depth offset) are
+    offered only where the survey has them (``hypotheses.candidate_hypotheses``)."""
     sim = misfit.simulation
-    return all(sim.canonical(q.name) is not None for q in h.parameters if not is_constant(q.name))
+    return all(sim.canonical(q.name) is not None for q in h.parameters if not is_instrument_term(q.name))
 
 
 def _lr_objective(misfit: Misfit, f: Fit) -> float:
@@ -271,14 +350,26 @@ def _lr_objective(misfit: Misfit, f: Fit) -> float:
     return misfit.evaluate(f.p).support
 
 
+def _group(s: Scored) -> str:
+    """The group a hypothesis is tested in (the depths of one layer boundary; else itself)."""
+    return s.hypothesis.group or s.hypothesis.key
+
+
+def _group_sizes(scored: list[Scored]) -> dict[str, int]:
+    """How many hypotheses each group tests (its Bonferroni factor)."""
+    sizes: dict[str, int] = {}
+    for s in scored:
+        sizes[_group(s)] = sizes.get(_group(s), 0) + 1
+    return sizes
+
+
 def _best_of_groups(scored: list[Scored]) -> list[Scored]:
     """One entry per group (the layer-boundary depth with the largest score, its p-value
     multiplied by the number of depths searched: Bonferroni within the group)."""
     best: dict[str, Scored] = {}
-    size: dict[str, int] = {}
+    size = _group_sizes(scored)
     for s in scored:
-        g = s.hypothesis.group or s.hypothesis.key
-        size[g] = size.get(g, 0) + 1
+        g = _group(s)
         if g not in best or s.score > best[g].score:
             best[g] = s
     for g, s in best.items():
@@ -294,18 +385,40 @@ def _settled(f: Fit) -> bool:
     return len(Js) >= 2 and Js[-2] - Js[-1] < STALLED
 
 
-def _choose(significant: list[Scored]) -> Scored | None:
-    """Lowest AIC; a hypothesis with a searched depth must beat the others by more than 2 AIC
-    (within 2 the data cannot tell them apart and the simpler search-free one is kept)."""
+def _choose(significant: list[Scored]) -> tuple[Scored | None, bool]:
+    """Lowest AIC among the significant hypotheses, and whether the choice is tentative. Within
+    2 AIC the data cannot tell two apart, and the simpler one is kept: one whose extra parameters
+    the readings determine over one they do not, then one without a searched depth over one with.
+    A hypothesis with an undetermined parameter (caveats.py: e.g. a deep stratum's modulus
+    1.3e6 +- 1.1e7 kPa) that beats every determined one by more than that is accepted as tentative:
+    it says where, not how much."""
     if not significant:
-        return None
+        return None, False
     best = min(significant, key=lambda s: s.aic)
-    plain = [s for s in significant if not s.hypothesis.group]
-    if best.hypothesis.group and plain:
-        rival = min(plain, key=lambda s: s.aic)
-        if rival.aic - best.aic < 2.0:
-            return rival
-    return best
+    for simpler in (lambda s: s.determined, lambda s: not s.hypothesis.group):
+        if not simpler(best):
+            pool = [s for s in significant if simpler(s) and (s.determined or not best.determined)]
+            if pool:
+                rival = min(pool, key=lambda s: s.aic)
+                if rival.aic - best.aic < EQUAL_AIC:
+                    best = rival
+    return best, not best.determined
+
+
+def _judge(s: Scored) -> None:
+    """Whether the readings determine the refit's extra parameters: no 'not-determined' or
+    'at-bound' caveat (geoback.caveats) on any of them."""
+    from ..caveats import fit_caveats
+    from ..parameters import parameter_limits
+
+    misfit, f = s.misfit, s.refit
+    values = misfit.values(f.p)
+    limits = [parameter_limits(misfit.simulation, n, values) for n in misfit.parameters.names]
+    mine = set(s.hypothesis.names)
+    found = fit_caveats(f, s.reliability, misfit.parameters, limits, {})
+    s.caveats = [c for c in found if c.code in ("not-determined", "at-bound")
+                 and (c.parameter in mine or (c.parameter is None and any(n in c.message for n in mine)))]
+    s.determined = not s.caveats
 
 
 def _compare(s: Scored, J0: float, searched: int) -> None:
@@ -323,7 +436,7 @@ def _compare(s: Scored, J0: float, searched: int) -> None:
 def _split_layer_misfit(current: Misfit, case, loaded, layer: str, z: float, p_hat: np.ndarray,
                         E_below: float) -> Misfit:
     """The current model with layer `layer` split at depth z into two meshed layers (conforming
-    boundary) and the lower layer's modulus identified."""
+    boundary) and the lower layer's modulus identified (starting from E_below, the others from p_hat)."""
     from ..simulation import make_simulation
 
     layers = list(case.ground.layers)
@@ -333,69 +446,155 @@ def _split_layer_misfit(current: Misfit, case, loaded, layer: str, z: float, p_h
     split = loaded.with_case(case.model_copy(update={"ground": ground}))
     sim = make_simulation(split, backend=getattr(current.simulation, "backend", None),
                           blocks=list(current.data.blocks))
-    spec = Parameter(name=f"E[{layer}_below]", initial=float(E_below), bounds=(float(E_below) / 50, float(E_below) * 50))
+    E_ref = float(current.values(p_hat)[f"E[{layer}]"])
+    spec = Parameter(name=f"E[{layer}_below]", initial=float(E_below), bounds=(E_ref / 50, E_ref * 50))
     return current.extended([spec], simulation=sim, start=p_hat)
 
 
-def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], settings: Settings, method: str,
-                          say) -> Scored:
-    """Profile the boundary depth: conforming refits at the best-scored depths, then bisect."""
-    layer = group[0].hypothesis.key.split("[", 1)[1].split("@")[0]
-    key = f"zsplit[{layer}]"
-    depths = sorted(t.hypothesis.extra_values[key] for t in group)
-    step = depths[1] - depths[0] if len(depths) > 1 else 1.0
-    sim = current.simulation
-    case = sim.loaded.case
+def _moved_boundary_misfit(misfit: Misfit, below: str, z: float, start: np.ndarray) -> Misfit:
+    """`misfit` (whose case has the meshed layer `below`) with that layer's top moved to depth z."""
+    from ..simulation import make_simulation
+
+    sim0 = misfit.simulation
+    case = sim0.loaded.case
+    layers = [ly.model_copy(update={"top": float(z)}) if ly.name == below else ly for ly in case.ground.layers]
+    moved = sim0.loaded.with_case(case.model_copy(update={"ground": case.ground.model_copy(update={"layers": layers})}))
+    sim = make_simulation(moved, backend=getattr(sim0, "backend", None), blocks=list(misfit.data.blocks))
+    return misfit.extended([], simulation=sim, start=start)
+
+
+def _layer_range(case, layer: str) -> tuple[float, float]:
     names = [ly.name for ly in case.ground.layers]
     lo_z = case.ground.layers[names.index(layer)].top
     hi_z = ([ly.top for ly in case.ground.layers if ly.top > lo_z] + [case.geometry.depth])[0]
-    by_depth = {t.hypothesis.extra_values[key]: t for t in group}
-    E0 = float(current.values(cur_fit.p)[f"E[{layer}]"])
-    tried: dict[float, Scored] = {}
+    return float(lo_z), float(hi_z)
 
-    def attempt(z: float, template: Scored) -> None:
-        z = round(float(z), 3)
-        if z in tried or not lo_z < z < hi_z:
-            return
-        say(f"refitting with a layer boundary at {z:g} m in '{layer}'")
-        try:
-            misfit = _split_layer_misfit(current, case, sim.loaded, layer, z, cur_fit.p, E0)
-        except Exception as exc:  # a depth gmsh cannot mesh (too close to the tunnel): skip it
-            say(f"  skipped depth {z:g} m: {exc}")
-            return
-        h = template.hypothesis
-        hyp = Hypothesis(f"layer-boundary[{layer}@{z:g}]", h.kind, f"a different stratum below {z:g} m in '{layer}'",
-                         f"Below {z:g} m depth the ground of '{layer}' has another modulus (an unmodelled layer "
-                         f"boundary, meshed as a new layer '{layer}_below').",
-                         [Parameter(name=f"E[{layer}_below]", initial=E0)], {key: z}, group=h.group)
-        t = Scored(hyp, template.score, template.dof, template.p_score, misfit=misfit)
+
+def _depth_tolerance(lo: float, hi: float) -> float:
+    return float(min(0.05, max(0.01, 1e-3 * (hi - lo))))
+
+
+def _boundary_hypothesis(h: Hypothesis, layer: str, z: float, E0: float) -> Hypothesis:
+    key = f"zsplit[{layer}]"
+    return Hypothesis(f"layer-boundary[{layer}@{z:g}]", h.kind, f"a different stratum below {z:.3g} m in '{layer}'",
+                      f"Below {z:.3g} m depth the ground of '{layer}' has another modulus (an unmodelled layer "
+                      f"boundary, meshed as a new layer '{layer}_below').",
+                      [Parameter(name=f"E[{layer}_below]", initial=E0)], {key: z}, group=h.group)
+
+
+def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], settings: Settings, method: str,
+                          say, rival_J: float | None = None) -> Scored:
+    """Profile the boundary depth over a continuous depth (``depth.py``): conforming refits at seed
+    depths (the three best-scored and a few spread over the layer), then a search for the minimum
+    (not when the best seed is LOSING J units above `rival_J`, the best refit of another
+    hypothesis: it cannot win); its 95 % interval is found if it is accepted."""
+    layer = group[0].hypothesis.key.split("[", 1)[1].split("@")[0]
+    sim = current.simulation
+    case = sim.loaded.case
+    lo_z, hi_z = _layer_range(case, layer)
+    E0 = float(current.values(cur_fit.p)[f"E[{layer}]"])
+    J0 = _lr_objective(current, cur_fit)
+    template = group[0]
+
+    def refit_at(z: float, near: Scored | None) -> Scored:
+        start, E_start = (cur_fit.p, E0) if near is None else (near.refit.p[:-1], float(near.refit.p[-1]))
+        misfit = _split_layer_misfit(current, case, sim.loaded, layer, z, start, E_start)
+        t = Scored(_boundary_hypothesis(template.hypothesis, layer, z, E0), template.score, template.dof,
+                   template.p_score, misfit=misfit)
         t.refit, t.reliability = _fit_and_assess(misfit, settings, method, REFIT_ITERATIONS)
-        _compare(t, _lr_objective(current, cur_fit), 1)
-        tried[z] = t
+        _compare(t, J0, 1)
+        return t
 
     # the score is a linear approximation that can overrate deep boundaries: besides the three
-    # best-scored depths, seed refits evenly over the layer, then bisect around the best
-    for t in group[:3]:
-        attempt(t.hypothesis.extra_values[key], t)
-    for z in np.linspace(lo_z, hi_z, DEPTH_SEEDS + 2)[1:-1]:
-        attempt(min(depths, key=lambda d: abs(d - z)), by_depth[min(depths, key=lambda d: abs(d - z))])
-    for width in (step / 2, step / 4):
-        best_z = min(tried, key=lambda z: tried[z].refit.J)
-        nearest = by_depth[min(by_depth, key=lambda d: abs(d - best_z))]
-        attempt(best_z - width, nearest)
-        attempt(best_z + width, nearest)
-    best = min(tried.values(), key=lambda t: t.refit.J)
-    within = [z for z, t in tried.items() if t.refit.J - best.refit.J < 3.84]  # profile likelihood, 95 %
-    best.hypothesis.description += (f" Depths tried: {', '.join(f'{z:g}' for z in sorted(tried))} m; those within the "
-                                    f"95 % profile-likelihood band: {min(within):g}-{max(within):g} m.")
+    # best-scored depths, seed refits evenly over the layer
+    key = f"zsplit[{layer}]"
+    seeds = [t.hypothesis.extra_values[key] for t in group[:3]] + list(np.linspace(lo_z, hi_z, DEPTH_SEEDS + 2)[1:-1])
+    prof = profile_depth(layer, refit_at, lo_z, hi_z, seeds, _depth_tolerance(lo_z, hi_z), say, interval=False,
+                         stop_above=None if rival_J is None else rival_J + LOSING)
+    if not prof.points:
+        raise RuntimeError(f"no depth of a boundary in '{layer}' could be meshed and refitted")
+    best = prof.best
+    best.profile = prof
     return best
+
+
+def _reprofile_boundary(s: Scored, misfit: Misfit, f: Fit, settings: Settings, method: str, say) -> DepthProfile:
+    """The depth of an accepted boundary profiled again in a model with more effects added after it."""
+    layer = s.profile.layer
+    below = f"{layer}_below"
+
+    def refit_at(z: float, near: Scored | None) -> Scored:
+        m = _moved_boundary_misfit(misfit, below, z, f.p if near is None else near.refit.p)
+        t = Scored(_boundary_hypothesis(s.hypothesis, layer, z, s.hypothesis.parameters[0].initial), s.score,
+                   s.dof, s.p_score, misfit=m)
+        t.refit, t.reliability = _fit_and_assess(m, settings, method, REFIT_ITERATIONS)
+        return t
+
+    old = s.profile
+    seeds = [old.z_hat, old.low, old.high]
+    return profile_depth(layer, refit_at, old.lo_limit, old.hi_limit, seeds,
+                         _depth_tolerance(old.lo_limit, old.hi_limit), say)
+
+
+def _boundary_interval(rnd: Round, say) -> None:
+    """An accepted boundary: its depth's 95 % interval (a few more refits); if looking for an end
+    found a better depth, that depth is the accepted one."""
+    acc = rnd.accepted
+    say(f"profile-likelihood interval of the boundary depth in '{acc.profile.layer}'")
+    prof = acc.profile.interval()
+    best = prof.best
+    if best is not acc:
+        best.profile, best.p_score = prof, acc.p_score
+        _judge(best)
+        rnd.ranking[rnd.ranking.index(acc)] = best
+        rnd.accepted, rnd.tentative = best, not best.determined
+    rnd.accepted.hypothesis.description += f" The boundary's {prof.text()}."
+
+
+def _weigh(rnd: Round, cur_rel: Reliability, data) -> None:
+    """Akaike weights of the round's refitted hypotheses and of its model without them; the rival
+    of the accepted one (within 2 AIC) and the readings that would tell the two apart."""
+    refitted = [s for s in rnd.ranking if s.settled and np.isfinite(s.aic)]
+    if not refitted:
+        return
+    rnd.aic = cur_rel.aic
+    rnd.weights = akaike_weights({NO_ADDITION: cur_rel.aic, **{s.hypothesis.key: s.aic for s in refitted}})
+    for s in refitted:
+        s.weight = rnd.weights[s.hypothesis.key]
+    acc = rnd.accepted
+    if acc is None:
+        return
+    rivals = [s for s in refitted if s is not acc and abs(s.aic - acc.aic) < EQUAL_AIC]
+    if rivals:
+        rnd.rival = min(rivals, key=lambda s: s.aic)
+        rnd.separation = separation(acc, rnd.rival, data)
+
+
+def _detectable(ranking: list[Scored], scored: list[Scored], threshold: float) -> None:
+    """The size of each hypothesis' effect its score test would catch with 80 % probability at the
+    round's level (members of a group at the level divided by the group's size, as tested)."""
+    sizes = _group_sizes(scored)
+    cache: dict = {}
+    for s in scored:
+        if s.collinear_with is not None or s.m2_norms is None:
+            continue
+        level = threshold / sizes[_group(s)]
+        key = (s.dof, round(level, 12))
+        if key not in cache:
+            cache[key] = detectable_lambda(s.dof, level)
+        lam = cache[key]
+        s.detectable = {n: float(np.sqrt(lam) / nrm) if nrm > 0 else float("inf")
+                        for n, nrm in zip(s.hypothesis.names, s.m2_norms)}
 
 
 def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4, method: str = "lm",
              progress=None) -> Diagnosis:
     """Find what the model is missing (see the module docstring). case: a LoadedCase or an Analysis."""
+    import time
+
     from ..identification import Analysis, prepare
 
+    t_start = time.perf_counter()
     analysis = case if isinstance(case, Analysis) else prepare(case)
     if analysis.misfit is None:
         from ..errors import GeobackError
@@ -424,6 +623,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         testable = [s for s in ranking if s.collinear_with is None]
         unscored = yielding.screen(current, cur_fit.p)  # likelihood-ratio refits only (yielding.py)
         threshold = alpha / max(len(testable) + len(unscored), 1)
+        _detectable(ranking, scored, threshold)
         # adequate: the omnibus chi^2 test passes (readings of known sigma), every estimated error
         # scale is within what the case allows, and no targeted alternative is significant
         chi2_ok = cur_rel.p_value >= alpha if cur_rel.dof > 0 else True
@@ -434,23 +634,80 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         rounds.append(rnd)
         if adequate or k == max_rounds:
             break
-        for s in testable[:refit_top]:
+        chosen = testable[:refit_top]  # the plain hypotheses first: a searched depth that cannot beat them
+        for s in sorted(chosen, key=lambda t: bool(t.hypothesis.group)):  # is not searched in detail
             if s.hypothesis.group:
                 group = sorted((t for t in scored if t.hypothesis.group == s.hypothesis.group), key=lambda t: -t.score)
-                winner = _refit_layer_boundary(current, cur_fit, group, settings, method, say)
+                plain = [t.refit.J for t in chosen if not t.hypothesis.group and t.settled]
+                try:
+                    winner = _refit_layer_boundary(current, cur_fit, group, settings, method, say,
+                                                   min(plain) if plain else None)
+                except RuntimeError as exc:
+                    say(f"  {exc}")
+                    continue
                 winner.p_score = s.p_score
                 ranking[ranking.index(s)] = winner
+                _judge(winner)
                 continue
             say(f"refitting with {s.hypothesis.title}")
             s.refit, s.reliability = _fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
             _compare(s, s.J0, 0)
-        ranking += [s for s in (yielding.refit(h, current, cur_fit, settings, method, say) for h in unscored) if s]
+            _judge(s)
+        for y in (yielding.refit(h, current, cur_fit, settings, method, say) for h in unscored):
+            if y is not None:
+                _judge(y)
+                ranking.append(y)
         significant = [s for s in ranking if s.refit is not None and s.p_lr < threshold and _settled(s.refit)]
-        rnd.accepted = _choose(significant)
+        rnd.accepted, rnd.tentative = _choose(significant)
+        if rnd.accepted is not None and rnd.accepted.profile is not None:
+            _boundary_interval(rnd, say)
+        _weigh(rnd, cur_rel, current.data)
         if rnd.accepted is None:
             rnd.adequate = chi2_ok and scales_ok  # nothing in the library does better
             break
         accepted.append(rnd.accepted)
         current, cur_fit, cur_rel = rnd.accepted.misfit, rnd.accepted.refit, rnd.accepted.reliability
-    final = conclude(current, cur_fit, current.simulation.loaded.case, analysis.loaded.digest(), {}, {})
-    return Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted)
+    final_profiles = {}
+    for j, s in enumerate(accepted):  # a boundary accepted before other effects: its depth in the final model
+        if s.profile is not None and j < len(accepted) - 1:
+            say(f"profiling the boundary depth in '{s.profile.layer}' again in the final model")
+            prof = _reprofile_boundary(s, current, cur_fit, settings, method, say)
+            if prof.points:
+                final_profiles[s.hypothesis.key] = prof
+                best = prof.best
+                current, cur_fit = best.misfit, best.refit
+    say("final joint fit: intervals")
+    final = conclude(current, cur_fit, current.simulation.loaded.case, analysis.loaded.digest(), {}, {},
+                     settings=settings)
+    intervals = _open_intervals(final, current, settings, [n for s in accepted for n in s.hypothesis.names])
+    return Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
+                     time.perf_counter() - t_start, intervals)
+
+
+def _open_intervals(final: Identification, misfit: Misfit, settings: Settings, names: list[str]) -> dict:
+    """Profile-likelihood intervals of every accepted parameter `conclude` left linearised (the
+    missing physics is where the model is most non-linear in its parameters: a modulus gradient, a
+    stratum's modulus; a few dozen fast fits each). An end at a limit (a bound or the allowed range)
+    is open: the readings do not bound the parameter there."""
+    from ..parameters import parameter_limits
+    from ..profile import profile_interval
+
+    out = {}
+    params, f, rel = misfit.parameters, final.fit, final.reliability
+    if f.status != "converged":
+        return out
+    values = misfit.values(f.p)
+    for name in names:
+        if name in final.profiled or name not in params.names:
+            continue
+        i = params.names.index(name)
+        sd = float(rel.std[i])
+        lim = parameter_limits(misfit.simulation, name, values)
+        lo, hi = max(params.lower[i], lim.lo), min(params.upper[i], lim.hi)
+        try:
+            a, b = profile_interval(misfit.anchored(f.p), settings, f.p, f.J, i, sd if np.isfinite(sd) else np.nan,
+                                    lo, hi, bool(params.log[i]) or lim.lo > 0)
+        except Exception:  # noqa: BLE001 - the linearised interval stays, with its caveat
+            continue
+        out[name] = (float(a), float(b), a <= lo, b >= hi)
+    return out

@@ -68,6 +68,8 @@ def screen(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
     if getattr(sim, "piecewise_smooth", False) or (case.construction is not None and case.construction.lining):
         return []
     values = misfit.values(p_hat)
+    if any(n.startswith("zoff[") for n in misfit.parameters.names) or sim.survey.offsets(values):
+        return []  # the elastoplastic simulation does not read inclinometers at depth offsets
     fld = sim.field(values)
     mesh, cell = fld.mesh, fld.cell_data
     g = case.geometry

@@ -7,7 +7,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 from matplotlib.transforms import blended_transform_factory
 
-from ..simulation import is_constant
+from ..simulation import is_instrument_term
 from .common import BEFORE, direction_words, new_figure
 
 
@@ -43,7 +43,7 @@ def instruments_figure(res, exploration=None, before: np.ndarray | None = None, 
     measured, computed = res.data.measured, f.x
     sigma = np.sqrt(np.clip(np.diag(res.data.covariance), 0, None))
     rw = res.standardised  # whitened with the case's C_x
-    identified = {n for n in res.parameters.names if is_constant(n)}
+    identified = {n for n in res.parameters.names if is_instrument_term(n)}  # the line lacks them
     mm = 1e3
     for ax, group in zip(axes, groups):
         block = group[0][0]
