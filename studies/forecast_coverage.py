@@ -15,7 +15,26 @@ trough after the lined stage), a Bayesian check: each replicate's true release b
 from the case's prior N(0.5, 0.15^2) (E = 40 MPa, K0 = 0.7 fixed), so the band is tested in the
 sense the prior gives it.
 
-    python studies/forecast_coverage.py [--replicates 1000] [--case paper|staged] [--small]
+`--case plastic` does it for the shipped Mohr-Coulomb case (cases/plastic-tunnel.yaml: three
+release stages, identify E, K0, c', phi') with a forecast of the surface settlement trough over the
+case's width (26 points, 0 to 50 m) and of the crown's settlement, both at the last stage. The truth
+is the Mohr-Coulomb model on a mesh twice as fine at the generator's true values
+(cases/generate_plastic_tunnel.py: E = 40 MPa, K0 = 0.9, c' = 50 kPa, phi' = 30 deg); the fits are
+on the case's own mesh (`--mesh-scale` > 1 / < 1 refines / coarsens both, the truth staying twice as
+fine). The fits are non-linear: each replicate starts from the fit of the noise-free fine-mesh
+readings (itself started from the case's initial values), which saves about a third of a fit's time.
+A replicate takes about 2 s on one core (fit about 1.4 s, the forecast and its sensitivities
+0.3 s), so the case's mesh is used as it is; `--workers N` splits the replicates over N processes
+(BLAS threads 1). Fits that do not converge are counted and printed; the coverage is given over
+the converged fits and, as a bound, with every failed fit counted as a miss. Result (500
+replicates, --workers 2, seed 20240601, 887 s on two shared cores): all 500 fits converged; 96.2 +-
+0.9 % at the crown, 92.8 to 97.0 % along the trough (mean 94.7 %). The spread of the points follows
+the ratio of the forecasts' scatter over the replicates to their FOSM std (0.94 near the axis, up to
+1.05 at 20-30 m), not a bias (mean error within 0.25 std); the sampling check through the model at
+the noise-free fit finds its band within about 7 % of the linear one and flags no forecast.
+
+    python studies/forecast_coverage.py [--replicates 1000] [--case paper|staged|plastic] [--small]
+                                        [--workers 1] [--mesh-scale 1]
 """
 from __future__ import annotations
 
@@ -56,30 +75,117 @@ def staged_case():
     return C.loaded_case(data)
 
 
-def run(replicates: int, which: str = "paper", seed: int = 1) -> dict:
+def plastic_truth() -> dict:
+    """The true values of cases/generate_plastic_tunnel.py (the generator of the shipped readings)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("generate_plastic_tunnel",
+                                                  C.ROOT / "cases" / "generate_plastic_tunnel.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return dict(mod.TRUTH)
+
+
+def plastic_case(mesh_scale: float = 1.0):
+    """cases/plastic-tunnel.yaml without its readings, with the trough over the case's width and the
+    crown's settlement forecast at the last stage, meshed `mesh_scale` times finer."""
+    from geoback.case import load_case
+
+    loaded = load_case(C.ROOT / "cases" / "plastic-tunnel.yaml")
+    data = loaded.case.model_dump(exclude_none=True)
+    for ins in data["instruments"]:
+        ins.pop("readings_file", None)
+    data["mesh"]["size_tunnel"] /= mesh_scale
+    data["mesh"]["size_far"] /= mesh_scale
+    g = data["geometry"]
+    data["forecasts"] = [
+        {"name": "trough", "kind": "line", "start": [0.0, 0.0], "end": [float(g["width"]), 0.0], "points": 26,
+         "component": "uy"},
+        {"name": "crown", "kind": "points", "points": [[0.0, -(g["axis_depth"] - g["radius"])]],
+         "components": ["uy"]}]
+    return C.loaded_case(data)
+
+
+_JOB: dict = {}  # what the worker processes of _replicates inherit (fork)
+
+
+def _chunk(rows: np.ndarray):
+    """Fit, C_p, forecast and its std of the replicates `rows` (run in a worker)."""
+    from threadpoolctl import threadpool_limits
+
+    from geoback.identification import identify_replicates
+
+    problem, model, names, p0 = _JOB["problem"], _JOB["model"], _JOB["names"], _JOB["p0"]
+    noisy = _JOB["noisy"][rows]
+    rep = identify_replicates(problem, noisy, p0=p0)
+    q, s = np.empty((len(rows), _JOB["nq"])), np.empty((len(rows), _JOB["nq"]))
+    with threadpool_limits(limits=1, user_api="blas"), model.reading():
+        for k in range(len(rows)):
+            q[k], F = model(problem.values_at(rep.p[k]), names, True)
+            s[k] = np.sqrt(np.einsum("ij,jk,ik->i", F, rep.covariance[k], F))
+    return rows, rep.p, rep.covariance, rep.converged, rep.at_bound, q, s
+
+
+def _replicates(problem, model, names, noisy, p0, nq, workers: int, progress=None):
+    """All replicates, in chunks over `workers` processes (fork; one when workers <= 1)."""
+    import multiprocessing as mp
+
+    N = len(noisy)
+    _JOB.update(problem=problem, model=model, names=names, noisy=noisy, p0=p0, nq=nq)
+    n = len(names)
+    out = {"p": np.empty((N, n)), "covariance": np.empty((N, n, n)), "converged": np.zeros(N, bool),
+           "at_bound": np.zeros((N, n), bool), "q": np.empty((N, nq)), "s": np.empty((N, nq))}
+    chunks = np.array_split(np.arange(N), max(1, int(np.ceil(N / 10))))
+    if workers > 1:
+        pool = mp.get_context("fork").Pool(workers)
+        results = pool.imap_unordered(_chunk, chunks)
+    else:
+        pool, results = None, map(_chunk, chunks)
+    done = 0
+    try:
+        for rows, p, cov, ok, bound, q, s in results:
+            out["p"][rows], out["covariance"][rows], out["converged"][rows] = p, cov, ok
+            out["at_bound"][rows], out["q"][rows], out["s"][rows] = bound, q, s
+            done += len(rows)
+            if progress:
+                progress(done, N)
+    finally:
+        if pool is not None:
+            pool.close()
+            pool.join()
+        _JOB.clear()
+    return out
+
+
+def run(replicates: int, which: str = "paper", seed: int = 1, workers: int = 1, mesh_scale: float = 1.0,
+        progress=None) -> dict:
     from geoback.forecast import forecast_model
     from geoback.identification import identify, identify_replicates, prepare
+    from geoback.parameters import resolve_values
     from geoback.simulate import refined_case
 
-    loaded = paper_case() if which == "paper" else staged_case()
+    loaded = {"paper": paper_case, "staged": staged_case, "plastic": lambda: plastic_case(mesh_scale)}[which]()
     coarse = prepare(loaded, with_readings=False)
     fine = prepare(loaded.with_case(refined_case(loaded.case, 2.0)), with_readings=False)
     names = coarse.parameters.names
     rng = np.random.default_rng(seed)
+    single = which in ("paper", "plastic")  # one truth for every replicate
     if which == "paper":
         truths = [dict(fine.values, **{"E[clay]": C.E_TRUE, "K0": C.K0_TRUE})] * replicates
+    elif which == "plastic":
+        truths = [dict(fine.values, **resolve_values(fine.simulation, plastic_truth()))] * replicates
     else:
         beta = np.clip(0.5 + 0.15 * rng.standard_normal(replicates), 0.06, 0.99)
         truths = [dict(fine.values, **{"E[clay]": 40000.0, "K0": 0.7, "beta[advance]": b}) for b in beta]
     fmodel = forecast_model(fine)
     clean, q_true = [], []
     with fmodel.reading():
-        for t in truths[:1] if which == "paper" else truths:
+        for t in truths[:1] if single else truths:
             q_true.append(fmodel(t)[0])
-    for t in truths[:1] if which == "paper" else truths:
+    for t in truths[:1] if single else truths:
         clean.append(fine.simulation.predict(t).x)
     clean, q_true = np.array(clean), np.array(q_true)
-    if which == "paper":
+    if single:
         clean, q_true = np.repeat(clean, replicates, 0), np.repeat(q_true, replicates, 0)
     problem = coarse.with_readings(clean[0])
     model = forecast_model(coarse)
@@ -91,21 +197,31 @@ def run(replicates: int, which: str = "paper", seed: int = 1) -> dict:
     bias = (q0 - q_true[0]) / s0
     noisy = clean + np.array([problem.misfit.data.noise(rng) for _ in range(replicates)])
     t0 = time.perf_counter()
-    rep = identify_replicates(problem, noisy)
-    inside = np.zeros((replicates, len(q0)), bool)
-    with model.reading():
-        for k in range(replicates):
-            q, F = model(coarse.values_at(rep.p[k]), names, True)
-            s = np.sqrt(np.einsum("ij,jk,ik->i", F, rep.covariance[k], F))
-            inside[k] = np.abs(q - q_true[k]) <= Z * s
+    extra = {}
+    if which == "plastic":  # non-linear fits: start at the noise-free fit, optionally in parallel
+        out = _replicates(problem, model, names, noisy, res0.fit.p, len(q0), workers, progress)
+        inside = np.abs(out["q"] - q_true) <= Z * out["s"]
+        ok = out["converged"]
+        extra = {"p": out["p"], "covariance": out["covariance"], "q": out["q"], "s": out["s"],
+                 "at_bound": out["at_bound"], "p0": res0.fit.p, "names": list(names), "noisy": noisy}
+    else:
+        rep = identify_replicates(problem, noisy)
+        inside = np.zeros((replicates, len(q0)), bool)
+        with model.reading():
+            for k in range(replicates):
+                q, F = model(coarse.values_at(rep.p[k]), names, True)
+                s = np.sqrt(np.einsum("ij,jk,ik->i", F, rep.covariance[k], F))
+                inside[k] = np.abs(q - q_true[k]) <= Z * s
+        ok = rep.converged
     seconds = time.perf_counter() - t0
-    ok = rep.converged
     cover = inside[ok].mean(axis=0)
     n = int(ok.sum())
     big = int(np.argmax(np.abs(q_true[0])))
-    return {"which": which, "replicates": replicates, "converged": n, "coverage": cover,
+    return {"which": which, "replicates": replicates, "converged": n, "failed": replicates - n,
+            "coverage": cover, "coverage_failed_as_miss": (inside & ok[:, None]).sum(axis=0) / replicates,
             "se": np.sqrt(cover * (1 - cover) / n), "largest": big, "bias_std": bias, "q_true": q_true[0],
-            "labels": [f"{lab}" for lab in range(len(q0))], "seconds": seconds, "x": _positions(loaded)}
+            "labels": [f"{lab}" for lab in range(len(q0))], "seconds": seconds, "x": _positions(loaded),
+            "inside": inside, "converged_mask": ok, **extra}
 
 
 def _positions(loaded) -> list[str]:
@@ -118,13 +234,20 @@ def _positions(loaded) -> list[str]:
     return out
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> dict:
     ap = C.parser(__doc__.splitlines()[0])
     ap.add_argument("--replicates", type=int, default=1000)
-    ap.add_argument("--case", choices=["paper", "staged"], default="paper")
-    args = ap.parse_args()
-    n = 100 if args.small else args.replicates
-    r = run(n, args.case, args.seed)
+    ap.add_argument("--case", choices=["paper", "staged", "plastic"], default="paper")
+    ap.add_argument("--workers", type=int, default=1, help="processes for the plastic case's fits")
+    ap.add_argument("--mesh-scale", type=float, default=1.0, help="plastic case: fitting mesh this many times finer")
+    args = ap.parse_args(argv)
+    n = (6 if args.case == "plastic" else 100) if args.small else args.replicates
+
+    def progress(done, total):
+        print(f"  {done}/{total} replicates ({time.perf_counter() - t0:.0f} s)", file=sys.stderr, flush=True)
+
+    t0 = time.perf_counter()
+    r = run(n, args.case, args.seed, args.workers, args.mesh_scale, progress if args.case == "plastic" else None)
     rows = [[lab, r["q_true"][i] * 1e3, r["bias_std"][i], r["coverage"][i], r["se"][i]]
             for i, lab in enumerate(r["x"])]
     header = ["forecast point", "truth [mm]", "mesh bias [std]", "coverage", "se"]
@@ -135,6 +258,13 @@ def main() -> None:
           f"the largest settlement ({r['x'][i]}): {r['coverage'][i]:.3f} +- {r['se'][i]:.3f}; over all points "
           f"{r['coverage'].min():.3f} to {r['coverage'].max():.3f} (mean {r['coverage'].mean():.3f}); "
           f"{r['seconds']:.1f} s")
+    if r["failed"]:
+        print(f"{r['failed']} fits failed (not converged); with them counted as misses the coverage at the largest "
+              f"settlement is {r['coverage_failed_as_miss'][i]:.3f}")
+    if "p" in r:  # the plastic case: keep every replicate for a closer look
+        np.savez(args.out / f"{NAME}_{args.case}.npz", **{k: r[k] for k in
+                 ("p", "covariance", "q", "s", "at_bound", "p0", "q_true", "inside", "converged_mask", "bias_std")},
+                 names=np.array(r["names"]))
     plt = C.pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 3.6))
     k = np.arange(len(rows))
@@ -147,6 +277,7 @@ def main() -> None:
     ax.legend(frameon=False)
     fig.tight_layout()
     fig.savefig(args.out / f"{NAME}_{args.case}.png", dpi=150)
+    return r
 
 
 if __name__ == "__main__":

@@ -91,6 +91,35 @@ def test_calibration_fraction_inside_95_ellipse(out):
     assert row["sample_sd_K0"] == pytest.approx(row["Cp_std_K0"], rel=0.2)
 
 
+# ----------------------------------------------------------------------------- forecast coverage, Mohr-Coulomb
+def test_forecast_coverage_plastic_machinery(out):
+    """The plastic variant of studies/forecast_coverage.py on a handful of replicates: every fit is
+    counted, and a replicate's band is the one geoback's own forecast (draws=0) gives on that
+    replicate's readings. The machinery only; the coverage needs >= 500 replicates (see the study)."""
+    import forecast_coverage as study
+    from geoback.forecast import forecast
+    from geoback.identification import identify, prepare
+
+    r = study.main(["--small", "--case", "plastic", "--out", str(out)])
+    _outputs_exist(out, f"{study.NAME}_plastic")
+    assert (out / f"{study.NAME}_plastic.npz").stat().st_size > 0
+    n = r["replicates"]
+    assert n == 6 and r["converged"] + r["failed"] == n and r["converged"] >= n - 1
+    assert r["inside"].shape == (n, 27) and r["x"][-1].startswith("crown")
+    assert r["x"][r["largest"]].startswith("crown")  # the crown settles more than the surface
+    assert np.abs(r["bias_std"]).max() < 0.5  # the fitting mesh's bias is small against the forecast std
+    np.testing.assert_allclose(r["p0"], [40000.0, 0.9, 50.0, 30.0], rtol=0.03)  # noise-free fit near the truth
+    # replicate 0 again, through geoback's identify and forecast
+    problem = prepare(study.plastic_case(), with_readings=False).with_readings(r["noisy"][0])
+    res = identify(problem, p0=r["p0"], require_dof=False, profile="none")
+    np.testing.assert_allclose(res.fit.p, r["p"][0], rtol=1e-4)
+    fc = forecast(problem, res, draws=0)
+    np.testing.assert_allclose(fc.value, r["q"][0], rtol=1e-4, atol=1e-7)
+    np.testing.assert_allclose(fc.std, r["s"][0], rtol=1e-3)
+    truth = r["q_true"]
+    np.testing.assert_array_equal((fc.low <= truth) & (truth <= fc.high), r["inside"][0])
+
+
 # ----------------------------------------------------------------------------- C_p vs scipy
 def test_cp_equals_scipy_least_squares_covariance():
     """C_p (eqn 55) equals inv(J^t J) of scipy.optimize.least_squares on the whitened residuals."""
