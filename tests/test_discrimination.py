@@ -111,3 +111,21 @@ def test_design_separate_ranks_candidates_between_the_leading_hypotheses(tmp_pat
     assert "best to tell" in result.output
     assert "separation_power" in (tmp_path / "out" / "design.csv").read_text().splitlines()[0]
     assert "## Telling" in (tmp_path / "out" / "design.md").read_text()
+
+
+def test_design_separate_says_when_there_is_nothing_to_tell_apart(tmp_path):
+    """The shipped staged-forecast case: diagnose refits no hypothesis, and design says so."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from geoback.cli import app
+
+    out = tmp_path / "out"
+    result = CliRunner().invoke(app, ["design", str(CASES / "staged-forecast.yaml"), "--separate", "--out", str(out),
+                                      "--no-plots"])
+    assert result.exit_code == 0, result.output
+    assert "nothing to tell apart" in result.output
+    assert "nothing to tell apart" in (out / "design.md").read_text()
+    assert json.loads((out / "design.json").read_text())["separation"]["candidates"] == []
+    assert "separation" not in (out / "design.csv").read_text().splitlines()[0]

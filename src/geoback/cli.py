@@ -314,13 +314,13 @@ def design(case: Path = typer.Argument(..., help="case file (YAML) with a design
 
         _say("diagnosing: which hypotheses explain the readings best")
         d = discriminate(analysis, d, progress=_say)
-        if d.discrimination is None:
-            _say("diagnose refitted no hypothesis: nothing to tell apart")
     write_design(d, folder, loaded.case.name, plots=plots)
     typer.echo(design_text(d, loaded.case.name))
     typer.echo(f"best: {d.best} ({100 * d.reduction[d.ranking[0]]:.0f} % narrower) -> {folder}/design.md")
     D = d.discrimination
-    if D is not None and D.separation.max() > 1e-9:
+    if D is not None and not D.found:
+        typer.echo("diagnose refitted no hypothesis: nothing to tell apart")
+    elif D is not None and D.separation.max() > 1e-9:
         k = int(D.separation.argmax())
         typer.echo(f"best to tell {D.a} from {D.b}: {D.names[k]} (power {D.power[k]:.2f})")
 

@@ -93,16 +93,16 @@ def case_candidates(analysis) -> list[tuple[int, object, object]]:
 
 def separate(analysis, d: DesignResult, progress=None) -> DesignResult:
     """`d` with the candidates' power to tell apart the two hypotheses `geoback diagnose` finds
-    leading (discrimination.py); unchanged (no discrimination) when diagnose refits none."""
+    leading (discrimination.py); `Discrimination.nothing()` when diagnose refits none."""
     from dataclasses import replace
 
     from .diagnosis import diagnose
-    from .discrimination import discriminate, leading_pair
+    from .discrimination import Discrimination, discriminate, leading_pair
 
     diagnosis = diagnose(analysis, progress=progress)
     pair = leading_pair(diagnosis, analysis)
     if pair is None:
-        return d
+        return replace(d, discrimination=Discrimination.nothing())
     cands = case_candidates(analysis)
     return replace(d, discrimination=discriminate(pair[0], pair[1], [b for _, _, b in cands], d.names))
 

@@ -54,6 +54,10 @@ def separation_lines(d) -> list[str]:
     D = d.discrimination
     if D is None:
         return []
+    if not D.found:
+        return ["", "## Telling hypotheses apart", "",
+                "`geoback diagnose` refitted no hypothesis: the readings show nothing its library can detect "
+                "that the case's model misses, so there is nothing to tell apart."]
     order = np.argsort(-D.separation, kind="stable")
     best = int(order[0])
     lines = ["", f"## Telling {D.a} from {D.b}", "",
@@ -74,13 +78,14 @@ def design_rows(d) -> tuple[list[str], list[list]]:
     header = ["candidate", "kind", "stage", "readings", "varied_field", "varied_value", "objective", "before",
               "after", "reduction", "rank"] + [f"std_after_{n}" for n in d.parameters] + \
         [f"target_std_after:{lab}" for lab in d.target_rows] + \
-        (["separation", "separation_power"] if d.discrimination is not None else [])
+        (["separation", "separation_power"] if d.discrimination is not None and d.discrimination.found else [])
     rank = np.empty(len(d.names), int)
     rank[d.ranking] = np.arange(1, len(d.names) + 1)
     rows = [[d.names[k], d.kinds[k], d.stages[k], d.readings[k], d.varied[k][0] if d.varied[k] else "",
              d.varied[k][1] if d.varied[k] else "", d.objective, d.before, d.after[k], d.reduction[k], rank[k]]
             + list(d.std_after[k]) + (list(d.target_after[k]) if len(d.target_rows) else [])
-            + ([d.discrimination.separation[k], d.discrimination.power[k]] if d.discrimination is not None else [])
+            + ([d.discrimination.separation[k], d.discrimination.power[k]]
+               if d.discrimination is not None and d.discrimination.found else [])
             for k in range(len(d.names))]
     return header, rows
 

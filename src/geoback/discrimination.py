@@ -36,6 +36,15 @@ class Discrimination:
     lam_ba: np.ndarray  # a's if b is true
     level: float
 
+    @classmethod
+    def nothing(cls, level: float = 0.05) -> "Discrimination":
+        """The diagnosis refitted no hypothesis: nothing to tell apart."""
+        return cls("", "", [], np.zeros(0), np.zeros(0), level)
+
+    @property
+    def found(self) -> bool:
+        return bool(self.names)
+
     @property
     def separation(self) -> np.ndarray:
         """The non-centrality a candidate guarantees whichever hypothesis is true."""
