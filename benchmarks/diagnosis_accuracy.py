@@ -20,6 +20,19 @@ effect of random kind and magnitude that the case's (baseline) model lacks:
                         log-uniform in (0.1, 0.6) m (shallower at most 80 % of its top station's depth)
   null                  nothing (noise only)
 
+Opt-in (--staged N, --yielding N; default 0, drawn from streams of their own after the cases above,
+which stay as they were):
+  release-before-lining a random two-stage tunnel with a shotcrete lining (random_staged_case: release
+                        beta before the lining, the rest on ground and lining; bedrock below; every
+                        instrument read after each stage); the truth releases beta = assumed +- d,
+                        d log-uniform in (0.05, 0.3)
+  lining-stiffness      the same, the truth's lining E = assumed x f or / f, f log-uniform in (2, 6)
+  null-staged           the same with nothing concealed (false alarms on staged, lined models)
+  yielding              a tunnel as above (K0 in (0.8, 1.2), coarser mesh) whose ground is in truth
+                        Mohr-Coulomb: phi' in (22, 35), psi in (0, 5) degrees, c' from Salencon's closed
+                        form for a plastic zone to R_p / R uniform in (1.2, 1.7); the case is elastic
+The staged kinds and yielding are ground physics; --staged N draws the three staged kinds in turn.
+
 Causes: integration-constant, bias-shift and depth-offset are instrument error, the others ground
 physics; a case is also scored by cause (instrument error / ground physics / nothing).
 
@@ -46,13 +59,14 @@ Coverage: for a correctly named case, whether the 95 % interval of each of its e
 (final joint fit, as the verdict reports it) holds the truth: Egrad, E[clay_below] and the
 boundary's depth (profile likelihood), n, K0grad, B[I1], beta, bias[I1], zoff[I1].
 
-    python benchmarks/diagnosis_accuracy.py [--concealed 60] [--null 30] [--seed 2024]
-        [--workers 2] [--out benchmarks/out/diagnosis_accuracy.csv] [--show INDEX]
+    python benchmarks/diagnosis_accuracy.py [--concealed 60] [--null 30] [--staged 0] [--yielding 0]
+        [--seed 2024] [--workers 2] [--out benchmarks/out/diagnosis_accuracy.csv] [--show INDEX]
 
 Printed: one progress line per case, then the confusion matrix (rows = truth kind incl. null,
 columns = named kind incl. 'nothing') for all cases, for effect size > 3 and for raw movement > 3
 sigma, the accuracy above the threshold (and per effect-size band), the false-alarm rate with its
-binomial standard error, total time and the median seconds per diagnose (the diagnose call only:
+binomial standard error (and per null kind when there are staged nulls), per kind the effect size and
+chi^2/dof before -> after (medians), total time and the median seconds per diagnose (the diagnose call only:
 meshing and the truth's forward runs excluded). The exit status is 1 when a floor is missed.
 CSV (one row per case): truth kind, its parameter and magnitude, effect size, raw movement, named
 kind, correct, every accepted hypothesis, the first one's estimate, round 1's refitted hypotheses
@@ -86,6 +100,10 @@ DEFAULT_OUT = ROOT / "benchmarks" / "out" / "diagnosis_accuracy.csv"
 KINDS = ["stiffness-gradient", "layer-boundary", "anisotropy", "K0-gradient", "integration-constant",
          "stress-release", "bias-shift", "depth-offset"]
 INSTRUMENT_KINDS = {"integration-constant", "bias-shift", "depth-offset"}
+STAGED_KINDS = ["release-before-lining", "lining-stiffness"]  # opt-in (--staged): a lined, staged tunnel
+YIELDING_KINDS = ["yielding"]  # opt-in (--yielding): Mohr-Coulomb truth, elastic case
+NULL_KINDS = ("null", "null-staged")  # nothing concealed (an unlined / a staged, lined tunnel)
+ALL_KINDS = KINDS + STAGED_KINDS + YIELDING_KINDS
 THRESHOLD = 3.0  # sigma
 FLOOR_ACCURACY, FLOOR_FALSE_ALARMS = 0.90, 0.05
 COLUMNS = ["case", "kind", "parameter", "magnitude", "effect_size", "raw_movement", "named", "correct",
@@ -95,7 +113,9 @@ COLUMNS = ["case", "kind", "parameter", "magnitude", "effect_size", "raw_movemen
 
 
 def cause_of(kind: str) -> str:
-    if kind in ("null", "nothing", "error", ""):
+    if kind in NULL_KINDS:
+        return "null"
+    if kind in ("nothing", "error", ""):
         return kind or "nothing"
     return "instrument" if kind in INSTRUMENT_KINDS else "ground"
 
@@ -105,6 +125,15 @@ def _loguniform(rng, lo: float, hi: float) -> float:
 
 
 # ------------------------------------------------------------------------------------------ cases
+def _tunnel(name, R, zc, width, depth, gamma, K0, E, nu, size_tunnel, size_far) -> dict:
+    """A case's name, geometry, one-layer ground ('clay') and mesh."""
+    return {"name": name,
+            "geometry": {"radius": round(R, 3), "axis_depth": round(zc, 3), "width": width, "depth": depth},
+            "ground": {"unit_weight": round(gamma, 3), "K0": round(K0, 4),
+                       "layers": [{"name": "clay", "top": 0.0, "E": E, "nu": round(nu, 4)}]},
+            "mesh": {"size_tunnel": size_tunnel, "size_far": size_far}}
+
+
 def random_case(index: int, kind: str, master_seed: int, strong: bool = False) -> dict:
     """The case data (baseline model, no readings), the truth's extras and the noise seed.
     strong: effect magnitudes from the upper half (in log) of each kind's range (coverage study)."""
@@ -193,11 +222,7 @@ def random_case(index: int, kind: str, master_seed: int, strong: bool = False) -
     if e_prior:
         e_param["prior"] = e_prior
     data = {
-        "name": f"bench-{index:03d}-{kind}",
-        "geometry": {"radius": round(R, 3), "axis_depth": round(zc, 3), "width": width, "depth": depth},
-        "ground": {"unit_weight": round(gamma, 3), "K0": round(K0, 4),
-                   "layers": [{"name": "clay", "top": 0.0, "E": E, "nu": round(nu, 4)}]},
-        "mesh": {"size_tunnel": round(R / 7.5, 4), "size_far": 5.0},
+        **_tunnel(f"bench-{index:03d}-{kind}", R, zc, width, depth, gamma, K0, E, nu, round(R / 7.5, 4), 5.0),
         "instruments": instruments,
         "parameters": [e_param, {"name": "K0", "initial": float(rng.uniform(0.4, 1.6)), "bounds": [0.05, 5.0]}],
     }
@@ -210,6 +235,115 @@ def random_case(index: int, kind: str, master_seed: int, strong: bool = False) -
     return {"index": index, "kind": kind, "data": data, "values": values, "extra_layer": extra_layer,
             "parameter": parameter, "magnitude": magnitude, "noise_seed": noise_seed, "truth": truth,
             "R": R, "zc": zc, "E": E, "nu": nu, "K0": K0, "layout": " ".join(layout)}
+
+
+def random_staged_case(index: int, kind: str, master_seed: int) -> dict:
+    """A random two-stage lined tunnel (cases/staged-tunnel.yaml's layout: release beta before a
+    lining, the rest on ground and lining together; bedrock below) read after each stage by an
+    inclinometer beside it, an extensometer above the crown and surface points. The case identifies
+    E and K0 with the release before the lining and the lining's E as assumed; the truth differs in
+    one of them (or in nothing: 'null-staged').
+
+      release-before-lining  beta[advance] = assumed beta +- d, d log-uniform in (0.05, 0.3), kept
+                             in (0.05, 0.95); assumed beta uniform in (0.2, 0.7)
+      lining-stiffness       E[shotcrete] = assumed E_l x f or / f, f log-uniform in (2, 6); assumed
+                             E_l log-uniform in (2, 15) GPa
+      null-staged            nothing (noise only)"""
+    rng = np.random.default_rng([master_seed, index, 1])  # a stream of its own (not random_case's)
+    R = float(rng.uniform(2.5, 4.0))
+    zc = float(rng.uniform(3.0 * R, 5.0 * R))
+    depth = round(zc + R + float(rng.uniform(6.0, 12.0)), 2)  # bedrock 6-12 m below the invert
+    width = round(15.0 * R, 2)
+    E = _loguniform(rng, 10000.0, 60000.0)
+    nu = float(rng.uniform(0.3, 0.49))
+    K0 = float(rng.uniform(0.5, 1.2))
+    gamma = float(rng.uniform(18.0, 21.0))
+    t = float(rng.uniform(0.2, 0.35))
+    El = _loguniform(rng, 2.0e6, 15.0e6)  # young or cracked shotcrete
+    beta0 = float(rng.uniform(0.2, 0.7))
+
+    x = float(rng.uniform(R + 1.5, R + 5.0))
+    toe = depth - 1.0
+    stations = int(rng.integers(8, 15))
+    spacing = round((toe - 1.5) / stations, 3)
+    length = zc - R - 1.0
+    n_ext = max(int(length // 2.0), 2)
+    ext_spacing = round(length / (n_ext + 0.5), 3)
+    n_pts = int(rng.integers(5, 9))
+    pts = [[round(float(v), 3), 0.0] for v in np.linspace(0.0, min(width - 1.0, 2.0 * zc), n_pts)]
+    instruments = [
+        {"name": "I1", "kind": "inclinometer", "x": round(x, 3), "toe_depth": round(toe, 3), "reference": "toe",
+         "spacing": spacing, "stations": stations, "sigma": round(float(rng.uniform(0.0001, 0.0003)), 6)},
+        {"name": "X1", "kind": "extensometer", "start": [0.0, 0.0], "end": [0.0, -round(length, 3)],
+         "spacing": ext_spacing, "stations": n_ext, "sigma": round(float(rng.uniform(0.0001, 0.0003)), 6),
+         "var_a": 4.0e-8},
+        {"name": "S1", "kind": "points", "points": pts, "components": ["uy"],
+         "sigma": round(float(rng.uniform(0.0003, 0.0008)), 6)},
+    ]
+    layout = f"I1@x{x:.1f}/{stations} X1/{n_ext} S1/{n_pts} (2 stages)"
+
+    values: dict = {}
+    parameter, magnitude = "", float("nan")
+    if kind == "release-before-lining":
+        d = _loguniform(rng, 0.05, 0.3)
+        up = rng.uniform() < 0.5
+        b = beta0 + d if up else beta0 - d
+        if not 0.05 <= b <= 0.95:
+            b = beta0 - d if up else beta0 + d
+        parameter, magnitude = "beta[advance]", float(min(max(b, 0.05), 0.95))
+        values = {parameter: magnitude}
+    elif kind == "lining-stiffness":
+        f = _loguniform(rng, 2.0, 6.0)
+        parameter = "E[shotcrete]"
+        magnitude = El * f if rng.uniform() < 0.5 else El / f
+        values = {parameter: magnitude}
+    elif kind != "null-staged":
+        raise ValueError(kind)
+    data = {
+        **_tunnel(f"bench-{index:03d}-{kind}", R, zc, width, depth, gamma, K0, E, nu, round(R / 8.0, 4), 4.0),
+        "construction": {
+            "lining": {"name": "shotcrete", "thickness": round(t, 3), "E": El, "nu": 0.2},
+            "stages": [{"name": "advance", "release": round(beta0, 4)},
+                       {"name": "lined", "install": "shotcrete", "release": 1.0}]},
+        "instruments": instruments,
+        "parameters": [{"name": "E", "initial": E * _loguniform(rng, 0.4, 2.5), "bounds": [1000.0, 1.0e6]},
+                       {"name": "K0", "initial": float(rng.uniform(0.4, 1.4)), "bounds": [0.1, 3.0]}],
+    }
+    noise_seed = int(rng.integers(0, 2**31 - 1))
+    return {"index": index, "kind": kind, "data": data, "values": values, "extra_layer": None, "strength": None,
+            "staged": True, "parameter": parameter, "magnitude": magnitude, "noise_seed": noise_seed,
+            "truth": dict(values), "R": R, "zc": zc, "E": E, "nu": nu, "K0": K0, "layout": layout}
+
+
+def plastic_cohesion(p0: float, phi: float, ratio: float) -> float:
+    """c' for which an unsupported circular tunnel under the hydrostatic stress p0 has a Mohr-Coulomb
+    plastic zone to ratio x R (Salencon's closed form, wall pressure 0):
+    R_p / R = [2 (p0 (Kp - 1) + sc) / ((1 + Kp) sc)]^(1 / (Kp - 1)), sc = 2 c cos phi / (1 - sin phi)."""
+    sp = math.sin(math.radians(phi))
+    kp = (1 + sp) / (1 - sp)
+    sc = 2 * p0 * (kp - 1) / (ratio ** (kp - 1) * (1 + kp) - 2)
+    return sc * (1 - sp) / (2 * math.cos(math.radians(phi)))
+
+
+def random_yielding_case(index: int, master_seed: int) -> dict:
+    """A random tunnel as random_case draws it (K0 redrawn in (0.8, 1.2), a coarser mesh: the truth
+    is non-linear), its ground in truth Mohr-Coulomb: phi' uniform in (22, 35) degrees, psi' in (0, 5),
+    c' from the closed form for a plastic zone to R_p / R uniform in (1.2, 1.7) under the mean
+    in-situ stress at the axis (an estimate: K0 != 1, the surface, the mesh). The case is elastic."""
+    spec = random_case(index, "null", master_seed)
+    rng = np.random.default_rng([master_seed, index, 2])
+    K0 = float(rng.uniform(0.8, 1.2))
+    phi, psi, ratio = float(rng.uniform(22.0, 35.0)), float(rng.uniform(0.0, 5.0)), float(rng.uniform(1.2, 1.7))
+    data = spec["data"]
+    data["name"] = f"bench-{index:03d}-yielding"
+    data["ground"]["K0"] = round(K0, 4)
+    data["mesh"] = {"size_tunnel": round(spec["R"] / 6.0, 4), "size_far": 6.0}
+    p0 = data["ground"]["unit_weight"] * spec["zc"] * (1 + K0) / 2
+    c = plastic_cohesion(p0, phi, ratio)
+    spec.update(kind="yielding", K0=K0, parameter=f"c' (phi {phi:.0f}, Rp/R {ratio:.2f})", magnitude=c,
+                strength={"model": "mohr-coulomb", "c": round(c, 3), "phi": round(phi, 3), "psi": round(psi, 3)},
+                truth={})
+    return spec
 
 
 def coverage(d, truth: dict) -> list[dict]:
@@ -235,6 +369,21 @@ def coverage(d, truth: dict) -> list[dict]:
 
 def _stack(readings: dict, analysis) -> np.ndarray:
     return np.concatenate([readings[b.name] for b in analysis.simulation.survey.blocks])
+
+
+def _stack_stages(readings: dict, analysis) -> np.ndarray:
+    """{instrument: {stage: readings}} stacked in the survey's (instrument, stage) block order."""
+    return np.concatenate([readings[b.name][b.stage] for b in analysis.simulation.survey.blocks])
+
+
+def _staged_noise(clean: np.ndarray, analysis, seed: int) -> np.ndarray:
+    """Noise drawn from each (instrument, stage) block's C_x, independent from stage to stage."""
+    rng = np.random.default_rng(seed)
+    out, offset = clean.copy(), 0
+    for b in analysis.simulation.survey.blocks:
+        out[offset:offset + b.m] += np.linalg.cholesky(b.covariance) @ rng.standard_normal(b.m)
+        offset += b.m
+    return out
 
 
 def _with_noise(clean: dict, loaded, seed: int) -> dict:
@@ -265,15 +414,22 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         truth_data = copy.deepcopy(spec["data"])
         if spec["extra_layer"]:
             truth_data["ground"]["layers"].append(dict(spec["extra_layer"]))
+        if spec.get("strength"):  # the truth's ground yields (the case's stays elastic)
+            truth_data["ground"]["layers"][0].update(spec["strength"])
         truth = LoadedCase(case_from_data(truth_data), path, {})
 
-        clean = synthetic_readings(truth, refine=2.0, values=spec["values"], noise_seed=None)
-        noisy = _with_noise(clean, loaded, spec["noise_seed"])  # what synthetic_readings(noise_seed=...) gives
-        base_clean = synthetic_readings(loaded, refine=2.0, values=None, noise_seed=None)
-
         problem = prepare(loaded, with_readings=False)
-        x_truth, x_base = _stack(clean, problem), _stack(base_clean, problem)
-        problem = problem.with_readings(_stack(noisy, problem))
+        if spec.get("staged"):  # every instrument read after every stage; noise drawn per (instrument, stage)
+            clean = synthetic_readings(truth, refine=2.0, values=spec["values"], noise_seed=None, by_stage=True)
+            base_clean = synthetic_readings(loaded, refine=2.0, values=None, noise_seed=None, by_stage=True)
+            x_truth, x_base = _stack_stages(clean, problem), _stack_stages(base_clean, problem)
+            problem = problem.with_readings(_staged_noise(x_truth, problem, spec["noise_seed"]))
+        else:
+            clean = synthetic_readings(truth, refine=2.0, values=spec["values"], noise_seed=None)
+            noisy = _with_noise(clean, loaded, spec["noise_seed"])  # what synthetic_readings(noise_seed=...) gives
+            base_clean = synthetic_readings(loaded, refine=2.0, values=None, noise_seed=None)
+            x_truth, x_base = _stack(clean, problem), _stack(base_clean, problem)
+            problem = problem.with_readings(_stack(noisy, problem))
         sigma = np.sqrt(np.diag(problem.misfit.data.covariance))
         row["raw_movement"] = float(np.max(np.abs(x_truth - x_base) / sigma))
         row["readings"] = len(x_truth)
@@ -294,7 +450,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         row["named"] = named
         row["cause"], row["named_cause"] = cause_of(spec["kind"]), cause_of(named)
         row["accepted"] = " + ".join(s.hypothesis.key for s in d.accepted)
-        row["correct"] = (named == "nothing") if spec["kind"] == "null" else (named == spec["kind"])
+        row["correct"] = (named == "nothing") if spec["kind"] in NULL_KINDS else (named == spec["kind"])
         if d.accepted:
             s = d.accepted[0]
             row["tentative"] = not s.determined
@@ -304,7 +460,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
                 row["estimate"] += f" z={prof.z_hat:.4g}[{prof.low:.4g},{prof.high:.4g}]"
         rivals = [r.rival.hypothesis.key for r in d.rounds if r.rival is not None]
         row["rival"] = " ".join(rivals)
-        if row["correct"] and spec["kind"] != "null":
+        if row["correct"] and spec["kind"] not in NULL_KINDS:
             cov = coverage(d, spec["truth"])
             row["coverage"] = cov
             row["covered"] = " ".join(f"{c['name']}:{'yes' if c['covered'] else 'NO'}" for c in cov)
@@ -333,20 +489,24 @@ def _fmt(v) -> str:
 
 
 def confusion(rows: list[dict], title: str) -> str:
-    truths = [k for k in KINDS + ["null"] if any(r["kind"] == k for r in rows)]
-    named = KINDS + ["nothing"] + sorted({r["named"] for r in rows} - set(KINDS) - {"nothing"})
+    truths = [k for k in ALL_KINDS + list(NULL_KINDS) if any(r["kind"] == k for r in rows)]
+    extra = [k for k in STAGED_KINDS + YIELDING_KINDS if any(k in (r["kind"], r["named"]) for r in rows)]
+    named = KINDS + extra + ["nothing"] + sorted({r["named"] for r in rows} - set(KINDS + extra) - {"nothing"})
     short = {"stiffness-gradient": "Egrad", "layer-boundary": "layer", "anisotropy": "aniso",
              "K0-gradient": "K0grad", "integration-constant": "int-const", "stress-release": "beta",
-             "bias-shift": "bias", "depth-offset": "zoff", "nothing": "nothing", "error": "error"}
-    cols = [c for c in named if c in KINDS + ["nothing"] or any(r["named"] == c for r in rows)]
+             "bias-shift": "bias", "depth-offset": "zoff", "nothing": "nothing", "error": "error",
+             "release-before-lining": "rel-lining", "lining-stiffness": "lining-E", "yielding": "yielding"}
+    cols = [c for c in named if c in KINDS + extra + ["nothing"] or any(r["named"] == c for r in rows)]
     w0 = max(len(t) for t in truths + ["truth \\ named"]) + 1
-    head = "truth \\ named".ljust(w0) + "".join(short.get(c, c).rjust(10) for c in cols) + "   n  correct"
+    width = {c: 11 if c in extra else 10 for c in cols}  # the staged kinds' short names are 10 wide
+    head = "truth \\ named".ljust(w0) + "".join(short.get(c, c).rjust(width[c]) for c in cols) + "   n  correct"
     lines = [title, head, "-" * len(head)]
     for t in truths:
         sub = [r for r in rows if r["kind"] == t]
         counts = [sum(r["named"] == c for r in sub) for c in cols]
         ok = sum(bool(r["correct"]) for r in sub)
-        lines.append(t.ljust(w0) + "".join(str(n).rjust(10) for n in counts) + f"{len(sub):4d}  {ok:3d}"
+        cells = "".join(str(n).rjust(width[c]) for n, c in zip(counts, cols))
+        lines.append(t.ljust(w0) + cells + f"{len(sub):4d}  {ok:3d}"
                      f" ({100 * ok / len(sub):.0f} %)")
     if not truths:
         lines.append("(no cases)")
@@ -370,7 +530,7 @@ def cause_confusion(rows: list[dict], title: str) -> str:
 def coverage_table(rows: list[dict]) -> tuple[str, list[dict]]:
     """Coverage of the extra parameters' 95 % intervals over the correctly named cases, per kind."""
     table = []
-    for kind in KINDS + ["all"]:
+    for kind in ALL_KINDS + ["all"]:
         items = [c for r in rows if r.get("coverage") and (kind == "all" or r["kind"] == kind) for c in r["coverage"]]
         if not items:
             continue
@@ -385,9 +545,28 @@ def coverage_table(rows: list[dict]) -> tuple[str, list[dict]]:
     return "\n".join(lines), table
 
 
+def fit_table(rows: list[dict]) -> str:
+    """Per truth kind: effect size (median, range) and chi^2/dof of the baseline before and of the
+    final model after diagnose (medians), and the median seconds per diagnose."""
+    def med(sub, key):
+        v = [r[key] for r in sub if isinstance(r[key], float) and math.isfinite(r[key])]
+        return (float(np.median(v)), min(v), max(v)) if v else (float("nan"),) * 3
+
+    lines = ["Per kind: effect size median [min, max]; chi2/dof before -> after (medians); seconds per diagnose:",
+             "kind                      n  effect size                  chi2/dof before -> after   s (median)"]
+    for kind in ALL_KINDS + list(NULL_KINDS):
+        sub = [r for r in rows if r["kind"] == kind]
+        if not sub:
+            continue
+        e, b, a, t = med(sub, "effect_size"), med(sub, "chi2dof_before"), med(sub, "chi2dof_after"), med(sub, "seconds")
+        lines.append(f"{kind:<22}{len(sub):>5}  {e[0]:7.2f} [{e[1]:6.2f}, {e[2]:7.2f}]     "
+                     f"{b[0]:8.2f} -> {a[0]:6.2f}           {t[0]:6.1f}")
+    return "\n".join(lines)
+
+
 def summary(rows: list[dict], seconds: float) -> tuple[str, bool]:
-    concealed = [r for r in rows if r["kind"] != "null"]
-    nulls = [r for r in rows if r["kind"] == "null"]
+    concealed = [r for r in rows if r["kind"] not in NULL_KINDS]
+    nulls = [r for r in rows if r["kind"] in NULL_KINDS]
     big = [r for r in concealed if isinstance(r["effect_size"], float) and r["effect_size"] > THRESHOLD]
     raw = [r for r in concealed if isinstance(r["raw_movement"], float) and r["raw_movement"] > THRESHOLD]
     out = [
@@ -409,6 +588,8 @@ def summary(rows: list[dict], seconds: float) -> tuple[str, bool]:
         cause_confusion(big + nulls, f"By cause, concealed cases with effect size > {THRESHOLD:g} and null cases:"),
         "",
         coverage_table(rows)[0],
+        "",
+        fit_table(rows),
         "",
     ]
     ok = True
@@ -445,6 +626,13 @@ def summary(rows: list[dict], seconds: float) -> tuple[str, bool]:
         if sub:
             a, kk, nn = rate(sub)
             out.append(f"  effect size in ({lo:g}, {hi:g}]: {kk}/{nn} correct ({100 * a:.0f} %)")
+    if any(r["kind"] == "null-staged" for r in nulls):  # false alarms on each model family apart
+        for kind in NULL_KINDS:
+            sub = [r for r in nulls if r["kind"] == kind]
+            if sub:
+                fa = sum(r["named"] != "nothing" for r in sub)
+                named = ", ".join(sorted({r["named"] for r in sub} - {"nothing"}))
+                out.append(f"  false alarms on {kind} cases: {fa}/{len(sub)}" + (f" (named: {named})" if named else ""))
     if nulls:
         fa = sum(r["named"] != "nothing" for r in nulls)
         p = fa / len(nulls)
@@ -490,6 +678,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--concealed", type=int, default=60, help="number of concealed-physics cases")
     ap.add_argument("--null", type=int, default=30, help="number of null cases (nothing concealed)")
+    ap.add_argument("--staged", type=int, default=0,
+                    help="number of staged, lined cases (release-before-lining, lining-stiffness, null-staged in turn)")
+    ap.add_argument("--yielding", type=int, default=0, help="number of yielding-ground cases (slow: non-linear truth)")
     ap.add_argument("--seed", type=int, default=2024, help="master seed (everything else is drawn from it)")
     ap.add_argument("--workers", type=int, default=2, help="worker processes")
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="CSV, one row per case")
@@ -503,6 +694,11 @@ def main(argv: list[str] | None = None) -> int:
     kinds = [KINDS[i % len(KINDS)] for i in range(args.concealed)]  # balanced, then shuffled
     kinds = [kinds[i] for i in rng.permutation(len(kinds))] + ["null"] * args.null
     specs = [random_case(i, k, args.seed) for i, k in enumerate(kinds)]
+    # opt-in kinds after those, drawn from streams of their own (the cases above are unchanged)
+    staged = STAGED_KINDS + ["null-staged"]
+    staged = [staged[i % len(staged)] for i in range(args.staged)]
+    specs += [random_staged_case(len(specs) + i, k, args.seed) for i, k in enumerate(staged)]
+    specs += [random_yielding_case(len(specs) + i, args.seed) for i in range(args.yielding)]
 
     work = Path(tempfile.mkdtemp(prefix="geoback-diagacc-"))
     cache = args.mesh_cache or (work / "cache")  # a temporary cache goes with `work`
@@ -535,7 +731,10 @@ def main(argv: list[str] | None = None) -> int:
     write_csv(rows, args.out)
     text, ok = summary(rows, seconds)
     print()
-    print(f"seed {args.seed}, {args.concealed} concealed + {args.null} null cases, {args.workers} workers; "
+    print(f"seed {args.seed}, {args.concealed} concealed + {args.null} null cases"
+          + (f" + {args.staged} staged" if args.staged else "")
+          + (f" + {args.yielding} yielding" if args.yielding else "")
+          + f", {args.workers} workers; "
           f"rows in {args.out}")
     print(text)
     return 0 if ok else 1
