@@ -22,7 +22,7 @@ so it cannot rank the hypothesis. Yielding is therefore tested as a likelihood r
    carries) and psi = PSI, its cohesion c' identified together with the baseline's parameters,
    starting from c_crit / MARGIN - the elastic stresses exceed that strength by MARGIN at the
    wall, a small plastic zone from which the fit can grow or shrink it (c' up to 2 c_crit: an
-   elastic ground again).
+   elastic ground again) - and from half that (a wider zone), keeping the better fit.
 3. The likelihood-ratio test dJ ~ chi^2(1) as for the other refits, in the same Bonferroni family.
    The null (c' at or above c_crit, every point elastic) lies on the boundary of the parameter
    space, where the statistic is a 50:50 mixture of 0 and chi^2(1): the chi^2(1) reference is
@@ -46,6 +46,10 @@ from .hypotheses import KINDS, Hypothesis
 PHI = 30.0  # degrees: friction angle of the refit (fixed)
 PSI = 0.0  # degrees: dilation angle of the refit (fixed; no volume change in shear)
 MARGIN = 1.5  # the refit starts where the elastic stresses exceed the strength by this factor at the wall
+START_FACTORS = (0.5, 1.0)  # ... and from half that cohesion: from the small zone alone, the fit (E still the
+# elastic fit's, too soft for yielding ground) can walk c' up into the elastic region, where every
+# gradient in c' vanishes and it stops (measured: 3 of 18 yielding cases of the accuracy benchmark;
+# the half start names 2 of them, bench-047 and bench-054 of `--staged 45 --yielding 10`)
 STIFFNESS_TO_STRENGTH = 2000.0  # E / c of the weakest plausible ground
 SCREEN_RADIUS = 1.5  # elements whose centroid lies within this many radii of the tunnel axis
 
@@ -113,19 +117,27 @@ def refit(h: Hypothesis, current, cur_fit, settings, method: str, say):
     sim = current.simulation
     loaded = sim.loaded
     layer = h.key[len("yielding["):-1]
-    c0 = h.parameters[0].initial
-    layers = [ly.model_copy(update={"model": "mohr-coulomb", "c": c0, "phi": PHI, "psi": PSI})
-              if ly.name == layer else ly for ly in loaded.case.ground.layers]
-    case = loaded.case.model_copy(update={"ground": loaded.case.ground.model_copy(update={"layers": layers})})
-    say(f"refitting with {h.title} (c' from {c0:.3g} kPa, phi' = {PHI:g} deg)")
-    s = Scored(h, float("nan"), len(h.parameters), float("nan"))
-    try:
-        plastic = PlasticSimulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
-                                    backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
-        s.misfit = current.extended(h.parameters, simulation=plastic, start=cur_fit.p)
-        s.refit, s.reliability = _fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
-    except ForwardFailure as exc:
-        say(f"  not refitted: {exc}")
+    spec = h.parameters[0]
+    best = None
+    for factor in START_FACTORS:  # the better of the starts (a wider zone first: see START_FACTORS)
+        c0 = spec.initial * factor
+        layers = [ly.model_copy(update={"model": "mohr-coulomb", "c": c0, "phi": PHI, "psi": PSI})
+                  if ly.name == layer else ly for ly in loaded.case.ground.layers]
+        case = loaded.case.model_copy(update={"ground": loaded.case.ground.model_copy(update={"layers": layers})})
+        say(f"refitting with {h.title} (c' from {c0:.3g} kPa, phi' = {PHI:g} deg)")
+        s = Scored(h, float("nan"), len(h.parameters), float("nan"))
+        try:
+            plastic = PlasticSimulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
+                                        backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
+            s.misfit = current.extended([spec.model_copy(update={"initial": c0})], simulation=plastic,
+                                        start=cur_fit.p)
+            s.refit, s.reliability = _fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
+        except ForwardFailure as exc:
+            say(f"  not refitted from c' = {c0:.3g} kPa: {exc}")
+            continue
+        if best is None or s.refit.J < best.refit.J:
+            best = s
+    if best is None:
         return None
-    _compare(s, _lr_objective(current, cur_fit), 0)
-    return s
+    _compare(best, _lr_objective(current, cur_fit), 0)
+    return best
