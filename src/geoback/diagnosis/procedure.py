@@ -48,12 +48,9 @@ away, so:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 from scipy import special
 
-from ..case import Parameter
 from ..estimate import Fit, Settings, fit
 from ..identification import Identification, conclude
 from ..misfit import Misfit
@@ -61,156 +58,14 @@ from ..reliability import Reliability, chi2_sf
 from ..simulation import is_instrument_term
 from . import yielding
 from .compare import EQUAL_AIC, akaike_weights, detectable_lambda, separation
-from .depth import DepthProfile, profile_depth
 from .hypotheses import Hypothesis, candidate_hypotheses
+from .boundary import _boundary_interval, _refit_layer_boundary, _reprofile_boundary
+from .results import NO_ADDITION, Diagnosis, Mismatch, Round, Scored, _settled  # noqa: F401 (Mismatch: re-exported)
 
 COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mimic
-DEPTH_SEEDS = 7  # layer-boundary depths refitted evenly over a layer before bisection
 REFIT_ITERATIONS = 100
-STALLED = 0.01  # a refit whose J fell by less than this in its last step has stopped moving
-LOSING = 50.0  # J units: a boundary whose best seed depth is this far above another refit is not refined
 
 
-@dataclass
-class Mismatch:
-    instrument: str
-    kind: str
-    share: float  # of J
-    where: str  # plain words, e.g. "6-9 m depth"
-    size: float  # displacement mismatch over the stretch [m] (measured - computed)
-    sigmas: float  # its significance in standard deviations
-    text: str
-
-
-@dataclass
-class Scored:
-    hypothesis: Hypothesis
-    score: float
-    dof: int
-    p_score: float
-    collinear_with: str | None = None  # combination of baseline parameters it duplicates
-    refit: Fit | None = None
-    reliability: Reliability | None = None
-    J0: float = float("nan")
-    dJ: float = float("nan")
-    p_lr: float = float("nan")
-    aic: float = float("nan")
-    bic: float = float("nan")
-    misfit: Misfit | None = None  # the baseline extended with the hypothesis
-    m2_norms: np.ndarray | None = None  # per extra parameter: the whitened sensitivity the baseline cannot mimic
-    detectable: dict = field(default_factory=dict)  # parameter -> |change| the score test catches with 80 %
-    determined: bool = True  # the readings determine every extra parameter of the refit (caveats.py)
-    caveats: list = field(default_factory=list)  # the refit's caveats on its extra parameters
-    profile: DepthProfile | None = None  # a layer boundary's depth profile
-    weight: float = float("nan")  # Akaike weight in its round
-
-    @property
-    def settled(self) -> bool:
-        return self.refit is not None and _settled(self.refit)
-
-
-@dataclass
-class Round:
-    chi2: float
-    dof: int
-    p_value: float
-    mismatches: list[Mismatch]
-    ranking: list[Scored]
-    accepted: Scored | None
-    adequate: bool = False  # chi^2 test passed and no hypothesis' score test is significant
-    threshold: float = float("nan")  # per-hypothesis level alpha / K (Bonferroni over the library)
-    scales: list = field(default_factory=list)  # scales.ScaleEstimate of every group at this round's fit
-    scale_threshold: float = float("nan")  # per-scale level alpha / G (Bonferroni over the estimated scales)
-    aic: float = float("nan")  # of the round's model (no hypothesis added)
-    weights: dict = field(default_factory=dict)  # Akaike weights: hypothesis key (or NO_ADDITION) -> weight
-    rival: Scored | None = None  # a hypothesis within 2 AIC of the accepted one
-    separation: object = None  # compare.Separation of the accepted one and its rival
-    tentative: bool = False  # accepted although an extra parameter is not determined
-
-
-NO_ADDITION = "(no addition)"
-
-
-@dataclass
-class Diagnosis:
-    case: str
-    alpha: float
-    rounds: list[Round]
-    baseline: Identification  # the case's model fitted
-    final: Identification  # the model with every accepted extension, fitted
-    final_misfit: Misfit
-    accepted: list[Scored] = field(default_factory=list)
-    final_profiles: dict = field(default_factory=dict)  # key -> DepthProfile re-profiled in the final model
-    seconds: float = float("nan")
-    final_intervals: dict = field(default_factory=dict)  # name -> (low, high, low open, high open): profile-
-    # likelihood intervals of accepted parameters the final identification did not profile (at a bound)
-
-    @property
-    def baseline_fit(self) -> Fit:
-        return self.baseline.fit
-
-    @property
-    def baseline_reliability(self) -> Reliability:
-        return self.baseline.reliability
-
-    @property
-    def final_fit(self) -> Fit:
-        return self.final.fit
-
-    @property
-    def final_reliability(self) -> Reliability:
-        return self.final.reliability
-
-    @property
-    def adequate_before(self) -> bool:
-        return self.rounds[0].adequate
-
-    @property
-    def adequate_after(self) -> bool:
-        return self.rounds[-1].adequate
-
-    def estimates(self, s: Scored) -> list[tuple[str, float, float, float, float]]:
-        """(name, estimate, std, 95 % low, 95 % high) of an accepted hypothesis' parameters from the
-        FINAL joint fit (profile-likelihood intervals where the linearised ones are unreliable; a
-        profiled boundary's modulus with its depth profiled out too)."""
-        fin = self.final
-        lo, hi = fin.intervals95()
-        names = list(fin.parameters.names)
-        prof = self.depth_profile(s)
-        out = []
-        for name in s.hypothesis.names:
-            if name not in names:
-                continue
-            i = names.index(name)
-            a, b = float(lo[i]), float(hi[i])
-            if name in self.final_intervals:
-                a, b = self.final_intervals[name][:2]
-            if prof is not None:
-                a2, b2 = prof.modulus_interval(name, (a, b))
-                a, b = min(a, a2), max(b, b2)
-            out.append((name, float(self.final_fit.p[i]), float(fin.reliability.std[i]), a, b))
-        return out
-
-    def open_ends(self, name: str) -> tuple[bool, bool]:
-        """Whether the 95 % interval of an accepted parameter reaches a limit the readings do not
-        move it from (a profile-likelihood interval open at that end)."""
-        got = self.final_intervals.get(name) or self.final.profiled.get(name)
-        return (bool(got[2]), bool(got[3])) if got else (False, False)
-
-    def depth_profile(self, s: Scored) -> DepthProfile | None:
-        """The depth profile of an accepted boundary in the final model (or its round's)."""
-        return self.final_profiles.get(s.hypothesis.key, s.profile)
-
-    @property
-    def causes(self) -> dict[str, list[Scored]]:
-        """The accepted hypotheses by cause: 'instrument' and 'ground'."""
-        out = {"instrument": [], "ground": []}
-        for s in self.accepted:
-            out[s.hypothesis.cause].append(s)
-        return out
-
-
-# ---------------------------------------------------------------------------------------------
 def _fit_and_assess(misfit: Misfit, settings: Settings, method: str, max_iterations=None):
     res = fit(misfit, settings, method=method, max_iterations=max_iterations)
     return res, conclude(misfit, res, None, "", {}, {}).reliability
@@ -377,14 +232,6 @@ def _best_of_groups(scored: list[Scored]) -> list[Scored]:
     return sorted(best.values(), key=lambda s: (s.p_score, -s.score))
 
 
-def _settled(f: Fit) -> bool:
-    """Converged, or stopped by the iteration limit while J no longer moves."""
-    if f.status == "converged":
-        return True
-    Js = [h.J for h in f.history if h.accepted]
-    return len(Js) >= 2 and Js[-2] - Js[-1] < STALLED
-
-
 def _choose(significant: list[Scored]) -> tuple[Scored | None, bool]:
     """Lowest AIC among the significant hypotheses, and whether the choice is tentative. Within
     2 AIC the data cannot tell two apart, and the simpler one is kept: one whose extra parameters
@@ -431,124 +278,6 @@ def _compare(s: Scored, J0: float, searched: int) -> None:
     m = len(s.reliability.whitened_residual)
     s.aic = s.reliability.aic + 2 * searched
     s.bic = s.reliability.bic + searched * np.log(m)
-
-
-def _split_layer_misfit(current: Misfit, case, loaded, layer: str, z: float, p_hat: np.ndarray,
-                        E_below: float) -> Misfit:
-    """The current model with layer `layer` split at depth z into two meshed layers (conforming
-    boundary) and the lower layer's modulus identified (starting from E_below, the others from p_hat)."""
-    from ..simulation import make_simulation
-
-    layers = list(case.ground.layers)
-    i = [ly.name for ly in layers].index(layer)
-    lower = layers[i].model_copy(update={"name": f"{layer}_below", "top": float(z), "E": float(E_below)})
-    ground = case.ground.model_copy(update={"layers": layers[:i + 1] + [lower] + layers[i + 1:]})
-    split = loaded.with_case(case.model_copy(update={"ground": ground}))
-    sim = make_simulation(split, backend=getattr(current.simulation, "backend", None),
-                          blocks=list(current.data.blocks))
-    E_ref = float(current.values(p_hat)[f"E[{layer}]"])
-    spec = Parameter(name=f"E[{layer}_below]", initial=float(E_below), bounds=(E_ref / 50, E_ref * 50))
-    return current.extended([spec], simulation=sim, start=p_hat)
-
-
-def _moved_boundary_misfit(misfit: Misfit, below: str, z: float, start: np.ndarray) -> Misfit:
-    """`misfit` (whose case has the meshed layer `below`) with that layer's top moved to depth z."""
-    from ..simulation import make_simulation
-
-    sim0 = misfit.simulation
-    case = sim0.loaded.case
-    layers = [ly.model_copy(update={"top": float(z)}) if ly.name == below else ly for ly in case.ground.layers]
-    moved = sim0.loaded.with_case(case.model_copy(update={"ground": case.ground.model_copy(update={"layers": layers})}))
-    sim = make_simulation(moved, backend=getattr(sim0, "backend", None), blocks=list(misfit.data.blocks))
-    return misfit.extended([], simulation=sim, start=start)
-
-
-def _layer_range(case, layer: str) -> tuple[float, float]:
-    names = [ly.name for ly in case.ground.layers]
-    lo_z = case.ground.layers[names.index(layer)].top
-    hi_z = ([ly.top for ly in case.ground.layers if ly.top > lo_z] + [case.geometry.depth])[0]
-    return float(lo_z), float(hi_z)
-
-
-def _depth_tolerance(lo: float, hi: float) -> float:
-    return float(min(0.05, max(0.01, 1e-3 * (hi - lo))))
-
-
-def _boundary_hypothesis(h: Hypothesis, layer: str, z: float, E0: float) -> Hypothesis:
-    key = f"zsplit[{layer}]"
-    return Hypothesis(f"layer-boundary[{layer}@{z:g}]", h.kind, f"a different stratum below {z:.3g} m in '{layer}'",
-                      f"Below {z:.3g} m depth the ground of '{layer}' has another modulus (an unmodelled layer "
-                      f"boundary, meshed as a new layer '{layer}_below').",
-                      [Parameter(name=f"E[{layer}_below]", initial=E0)], {key: z}, group=h.group)
-
-
-def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], settings: Settings, method: str,
-                          say, rival_J: float | None = None) -> Scored:
-    """Profile the boundary depth over a continuous depth (``depth.py``): conforming refits at seed
-    depths (the three best-scored and a few spread over the layer), then a search for the minimum
-    (not when the best seed is LOSING J units above `rival_J`, the best refit of another
-    hypothesis: it cannot win); its 95 % interval is found if it is accepted."""
-    layer = group[0].hypothesis.key.split("[", 1)[1].split("@")[0]
-    sim = current.simulation
-    case = sim.loaded.case
-    lo_z, hi_z = _layer_range(case, layer)
-    E0 = float(current.values(cur_fit.p)[f"E[{layer}]"])
-    J0 = _lr_objective(current, cur_fit)
-    template = group[0]
-
-    def refit_at(z: float, near: Scored | None) -> Scored:
-        start, E_start = (cur_fit.p, E0) if near is None else (near.refit.p[:-1], float(near.refit.p[-1]))
-        misfit = _split_layer_misfit(current, case, sim.loaded, layer, z, start, E_start)
-        t = Scored(_boundary_hypothesis(template.hypothesis, layer, z, E0), template.score, template.dof,
-                   template.p_score, misfit=misfit)
-        t.refit, t.reliability = _fit_and_assess(misfit, settings, method, REFIT_ITERATIONS)
-        _compare(t, J0, 1)
-        return t
-
-    # the score is a linear approximation that can overrate deep boundaries: besides the three
-    # best-scored depths, seed refits evenly over the layer
-    key = f"zsplit[{layer}]"
-    seeds = [t.hypothesis.extra_values[key] for t in group[:3]] + list(np.linspace(lo_z, hi_z, DEPTH_SEEDS + 2)[1:-1])
-    prof = profile_depth(layer, refit_at, lo_z, hi_z, seeds, _depth_tolerance(lo_z, hi_z), say, interval=False,
-                         stop_above=None if rival_J is None else rival_J + LOSING)
-    if not prof.points:
-        raise RuntimeError(f"no depth of a boundary in '{layer}' could be meshed and refitted")
-    best = prof.best
-    best.profile = prof
-    return best
-
-
-def _reprofile_boundary(s: Scored, misfit: Misfit, f: Fit, settings: Settings, method: str, say) -> DepthProfile:
-    """The depth of an accepted boundary profiled again in a model with more effects added after it."""
-    layer = s.profile.layer
-    below = f"{layer}_below"
-
-    def refit_at(z: float, near: Scored | None) -> Scored:
-        m = _moved_boundary_misfit(misfit, below, z, f.p if near is None else near.refit.p)
-        t = Scored(_boundary_hypothesis(s.hypothesis, layer, z, s.hypothesis.parameters[0].initial), s.score,
-                   s.dof, s.p_score, misfit=m)
-        t.refit, t.reliability = _fit_and_assess(m, settings, method, REFIT_ITERATIONS)
-        return t
-
-    old = s.profile
-    seeds = [old.z_hat, old.low, old.high]
-    return profile_depth(layer, refit_at, old.lo_limit, old.hi_limit, seeds,
-                         _depth_tolerance(old.lo_limit, old.hi_limit), say)
-
-
-def _boundary_interval(rnd: Round, say) -> None:
-    """An accepted boundary: its depth's 95 % interval (a few more refits); if looking for an end
-    found a better depth, that depth is the accepted one."""
-    acc = rnd.accepted
-    say(f"profile-likelihood interval of the boundary depth in '{acc.profile.layer}'")
-    prof = acc.profile.interval()
-    best = prof.best
-    if best is not acc:
-        best.profile, best.p_score = prof, acc.p_score
-        _judge(best)
-        rnd.ranking[rnd.ranking.index(acc)] = best
-        rnd.accepted, rnd.tentative = best, not best.determined
-    rnd.accepted.hypothesis.description += f" The boundary's {prof.text()}."
 
 
 def _weigh(rnd: Round, cur_rel: Reliability, data) -> None:

@@ -1,0 +1,137 @@
+"""A layer boundary's depth in `diagnose`: conforming refits with the layer split at a depth,
+seeded over the layer, every low basin refined, the accepted boundary re-profiled for its 95 %
+interval (the profile itself: depth.py; the round that calls these: procedure.py)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..case import Parameter
+from ..estimate import Fit, Settings
+from ..misfit import Misfit
+from .depth import DepthProfile, profile_depth
+from .hypotheses import Hypothesis
+from .results import Round, Scored
+
+DEPTH_SEEDS = 7  # layer-boundary depths refitted evenly over a layer before bisection
+LOSING = 50.0  # J units: a boundary whose best seed depth is this far above another refit is not refined
+
+
+def _split_layer_misfit(current: Misfit, case, loaded, layer: str, z: float, p_hat: np.ndarray,
+                        E_below: float) -> Misfit:
+    """The current model with layer `layer` split at depth z into two meshed layers (conforming
+    boundary) and the lower layer's modulus identified (starting from E_below, the others from p_hat)."""
+    from ..simulation import make_simulation
+
+    layers = list(case.ground.layers)
+    i = [ly.name for ly in layers].index(layer)
+    lower = layers[i].model_copy(update={"name": f"{layer}_below", "top": float(z), "E": float(E_below)})
+    ground = case.ground.model_copy(update={"layers": layers[:i + 1] + [lower] + layers[i + 1:]})
+    split = loaded.with_case(case.model_copy(update={"ground": ground}))
+    sim = make_simulation(split, backend=getattr(current.simulation, "backend", None),
+                          blocks=list(current.data.blocks))
+    E_ref = float(current.values(p_hat)[f"E[{layer}]"])
+    spec = Parameter(name=f"E[{layer}_below]", initial=float(E_below), bounds=(E_ref / 50, E_ref * 50))
+    return current.extended([spec], simulation=sim, start=p_hat)
+
+
+def _moved_boundary_misfit(misfit: Misfit, below: str, z: float, start: np.ndarray) -> Misfit:
+    """`misfit` (whose case has the meshed layer `below`) with that layer's top moved to depth z."""
+    from ..simulation import make_simulation
+
+    sim0 = misfit.simulation
+    case = sim0.loaded.case
+    layers = [ly.model_copy(update={"top": float(z)}) if ly.name == below else ly for ly in case.ground.layers]
+    moved = sim0.loaded.with_case(case.model_copy(update={"ground": case.ground.model_copy(update={"layers": layers})}))
+    sim = make_simulation(moved, backend=getattr(sim0, "backend", None), blocks=list(misfit.data.blocks))
+    return misfit.extended([], simulation=sim, start=start)
+
+
+def _layer_range(case, layer: str) -> tuple[float, float]:
+    names = [ly.name for ly in case.ground.layers]
+    lo_z = case.ground.layers[names.index(layer)].top
+    hi_z = ([ly.top for ly in case.ground.layers if ly.top > lo_z] + [case.geometry.depth])[0]
+    return float(lo_z), float(hi_z)
+
+
+def _depth_tolerance(lo: float, hi: float) -> float:
+    return float(min(0.05, max(0.01, 1e-3 * (hi - lo))))
+
+
+def _boundary_hypothesis(h: Hypothesis, layer: str, z: float, E0: float) -> Hypothesis:
+    key = f"zsplit[{layer}]"
+    return Hypothesis(f"layer-boundary[{layer}@{z:g}]", h.kind, f"a different stratum below {z:.3g} m in '{layer}'",
+                      f"Below {z:.3g} m depth the ground of '{layer}' has another modulus (an unmodelled layer "
+                      f"boundary, meshed as a new layer '{layer}_below').",
+                      [Parameter(name=f"E[{layer}_below]", initial=E0)], {key: z}, group=h.group)
+
+
+def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], settings: Settings, method: str,
+                          say, rival_J: float | None = None) -> Scored:
+    """Profile the boundary depth over a continuous depth (``depth.py``): conforming refits at seed
+    depths (the three best-scored and a few spread over the layer), then a search for the minimum
+    (not when the best seed is LOSING J units above `rival_J`, the best refit of another
+    hypothesis: it cannot win); its 95 % interval is found if it is accepted."""
+    from .procedure import REFIT_ITERATIONS, _compare, _fit_and_assess, _lr_objective
+    layer = group[0].hypothesis.key.split("[", 1)[1].split("@")[0]
+    sim = current.simulation
+    case = sim.loaded.case
+    lo_z, hi_z = _layer_range(case, layer)
+    E0 = float(current.values(cur_fit.p)[f"E[{layer}]"])
+    J0 = _lr_objective(current, cur_fit)
+    template = group[0]
+
+    def refit_at(z: float, near: Scored | None) -> Scored:
+        start, E_start = (cur_fit.p, E0) if near is None else (near.refit.p[:-1], float(near.refit.p[-1]))
+        misfit = _split_layer_misfit(current, case, sim.loaded, layer, z, start, E_start)
+        t = Scored(_boundary_hypothesis(template.hypothesis, layer, z, E0), template.score, template.dof,
+                   template.p_score, misfit=misfit)
+        t.refit, t.reliability = _fit_and_assess(misfit, settings, method, REFIT_ITERATIONS)
+        _compare(t, J0, 1)
+        return t
+
+    # the score is a linear approximation that can overrate deep boundaries: besides the three
+    # best-scored depths, seed refits evenly over the layer
+    key = f"zsplit[{layer}]"
+    seeds = [t.hypothesis.extra_values[key] for t in group[:3]] + list(np.linspace(lo_z, hi_z, DEPTH_SEEDS + 2)[1:-1])
+    prof = profile_depth(layer, refit_at, lo_z, hi_z, seeds, _depth_tolerance(lo_z, hi_z), say, interval=False,
+                         stop_above=None if rival_J is None else rival_J + LOSING)
+    if not prof.points:
+        raise RuntimeError(f"no depth of a boundary in '{layer}' could be meshed and refitted")
+    best = prof.best
+    best.profile = prof
+    return best
+
+
+def _reprofile_boundary(s: Scored, misfit: Misfit, f: Fit, settings: Settings, method: str, say) -> DepthProfile:
+    """The depth of an accepted boundary profiled again in a model with more effects added after it."""
+    from .procedure import REFIT_ITERATIONS, _fit_and_assess
+    layer = s.profile.layer
+    below = f"{layer}_below"
+
+    def refit_at(z: float, near: Scored | None) -> Scored:
+        m = _moved_boundary_misfit(misfit, below, z, f.p if near is None else near.refit.p)
+        t = Scored(_boundary_hypothesis(s.hypothesis, layer, z, s.hypothesis.parameters[0].initial), s.score,
+                   s.dof, s.p_score, misfit=m)
+        t.refit, t.reliability = _fit_and_assess(m, settings, method, REFIT_ITERATIONS)
+        return t
+
+    old = s.profile
+    seeds = [old.z_hat, old.low, old.high]
+    return profile_depth(layer, refit_at, old.lo_limit, old.hi_limit, seeds,
+                         _depth_tolerance(old.lo_limit, old.hi_limit), say)
+
+
+def _boundary_interval(rnd: Round, say) -> None:
+    """An accepted boundary: its depth's 95 % interval (a few more refits); if looking for an end
+    found a better depth, that depth is the accepted one."""
+    from .procedure import _judge
+    acc = rnd.accepted
+    say(f"profile-likelihood interval of the boundary depth in '{acc.profile.layer}'")
+    prof = acc.profile.interval()
+    best = prof.best
+    if best is not acc:
+        best.profile, best.p_score = prof, acc.p_score
+        _judge(best)
+        rnd.ranking[rnd.ranking.index(acc)] = best
+        rnd.accepted, rnd.tentative = best, not best.determined
+    rnd.accepted.hypothesis.description += f" The boundary's {prof.text()}."

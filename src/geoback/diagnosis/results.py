@@ -1,0 +1,164 @@
+"""What `diagnose` finds, as data: a located mismatch, a scored (and refitted) hypothesis, a round,
+the whole diagnosis (read by diagnosis/report.py; built by diagnosis/procedure.py)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..estimate import Fit
+from ..identification import Identification
+from ..misfit import Misfit
+from ..reliability import Reliability
+from .depth import DepthProfile
+from .hypotheses import Hypothesis
+
+STALLED = 0.01  # a refit whose J fell by less than this in its last step has stopped moving
+
+
+@dataclass
+class Mismatch:
+    instrument: str
+    kind: str
+    share: float  # of J
+    where: str  # plain words, e.g. "6-9 m depth"
+    size: float  # displacement mismatch over the stretch [m] (measured - computed)
+    sigmas: float  # its significance in standard deviations
+    text: str
+
+
+@dataclass
+class Scored:
+    hypothesis: Hypothesis
+    score: float
+    dof: int
+    p_score: float
+    collinear_with: str | None = None  # combination of baseline parameters it duplicates
+    refit: Fit | None = None
+    reliability: Reliability | None = None
+    J0: float = float("nan")
+    dJ: float = float("nan")
+    p_lr: float = float("nan")
+    aic: float = float("nan")
+    bic: float = float("nan")
+    misfit: Misfit | None = None  # the baseline extended with the hypothesis
+    m2_norms: np.ndarray | None = None  # per extra parameter: the whitened sensitivity the baseline cannot mimic
+    detectable: dict = field(default_factory=dict)  # parameter -> |change| the score test catches with 80 %
+    determined: bool = True  # the readings determine every extra parameter of the refit (caveats.py)
+    caveats: list = field(default_factory=list)  # the refit's caveats on its extra parameters
+    profile: DepthProfile | None = None  # a layer boundary's depth profile
+    weight: float = float("nan")  # Akaike weight in its round
+
+    @property
+    def settled(self) -> bool:
+        return self.refit is not None and _settled(self.refit)
+
+
+@dataclass
+class Round:
+    chi2: float
+    dof: int
+    p_value: float
+    mismatches: list[Mismatch]
+    ranking: list[Scored]
+    accepted: Scored | None
+    adequate: bool = False  # chi^2 test passed and no hypothesis' score test is significant
+    threshold: float = float("nan")  # per-hypothesis level alpha / K (Bonferroni over the library)
+    scales: list = field(default_factory=list)  # scales.ScaleEstimate of every group at this round's fit
+    scale_threshold: float = float("nan")  # per-scale level alpha / G (Bonferroni over the estimated scales)
+    aic: float = float("nan")  # of the round's model (no hypothesis added)
+    weights: dict = field(default_factory=dict)  # Akaike weights: hypothesis key (or NO_ADDITION) -> weight
+    rival: Scored | None = None  # a hypothesis within 2 AIC of the accepted one
+    separation: object = None  # compare.Separation of the accepted one and its rival
+    tentative: bool = False  # accepted although an extra parameter is not determined
+
+
+NO_ADDITION = "(no addition)"
+
+
+@dataclass
+class Diagnosis:
+    case: str
+    alpha: float
+    rounds: list[Round]
+    baseline: Identification  # the case's model fitted
+    final: Identification  # the model with every accepted extension, fitted
+    final_misfit: Misfit
+    accepted: list[Scored] = field(default_factory=list)
+    final_profiles: dict = field(default_factory=dict)  # key -> DepthProfile re-profiled in the final model
+    seconds: float = float("nan")
+    final_intervals: dict = field(default_factory=dict)  # name -> (low, high, low open, high open): profile-
+    # likelihood intervals of accepted parameters the final identification did not profile (at a bound)
+
+    @property
+    def baseline_fit(self) -> Fit:
+        return self.baseline.fit
+
+    @property
+    def baseline_reliability(self) -> Reliability:
+        return self.baseline.reliability
+
+    @property
+    def final_fit(self) -> Fit:
+        return self.final.fit
+
+    @property
+    def final_reliability(self) -> Reliability:
+        return self.final.reliability
+
+    @property
+    def adequate_before(self) -> bool:
+        return self.rounds[0].adequate
+
+    @property
+    def adequate_after(self) -> bool:
+        return self.rounds[-1].adequate
+
+    def estimates(self, s: Scored) -> list[tuple[str, float, float, float, float]]:
+        """(name, estimate, std, 95 % low, 95 % high) of an accepted hypothesis' parameters from the
+        FINAL joint fit (profile-likelihood intervals where the linearised ones are unreliable; a
+        profiled boundary's modulus with its depth profiled out too)."""
+        fin = self.final
+        lo, hi = fin.intervals95()
+        names = list(fin.parameters.names)
+        prof = self.depth_profile(s)
+        out = []
+        for name in s.hypothesis.names:
+            if name not in names:
+                continue
+            i = names.index(name)
+            a, b = float(lo[i]), float(hi[i])
+            if name in self.final_intervals:
+                a, b = self.final_intervals[name][:2]
+            if prof is not None:
+                a2, b2 = prof.modulus_interval(name, (a, b))
+                a, b = min(a, a2), max(b, b2)
+            out.append((name, float(self.final_fit.p[i]), float(fin.reliability.std[i]), a, b))
+        return out
+
+    def open_ends(self, name: str) -> tuple[bool, bool]:
+        """Whether the 95 % interval of an accepted parameter reaches a limit the readings do not
+        move it from (a profile-likelihood interval open at that end)."""
+        got = self.final_intervals.get(name) or self.final.profiled.get(name)
+        return (bool(got[2]), bool(got[3])) if got else (False, False)
+
+    def depth_profile(self, s: Scored) -> DepthProfile | None:
+        """The depth profile of an accepted boundary in the final model (or its round's)."""
+        return self.final_profiles.get(s.hypothesis.key, s.profile)
+
+    @property
+    def causes(self) -> dict[str, list[Scored]]:
+        """The accepted hypotheses by cause: 'instrument' and 'ground'."""
+        out = {"instrument": [], "ground": []}
+        for s in self.accepted:
+            out[s.hypothesis.cause].append(s)
+        return out
+
+
+# ---------------------------------------------------------------------------------------------
+def _settled(f: Fit) -> bool:
+    """Converged, or stopped by the iteration limit while J no longer moves."""
+    if f.status == "converged":
+        return True
+    Js = [h.J for h in f.history if h.accepted]
+    return len(Js) >= 2 and Js[-2] - Js[-1] < STALLED
