@@ -21,7 +21,6 @@ each child's maximum resident set.
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import os
 import resource

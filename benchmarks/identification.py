@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from fd_loop import fd_least_squares  # noqa: E402
 from table import print_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,35 +72,20 @@ def run_geoback(loaded) -> dict:
 
 
 def run_scipy(loaded, ls_method: str) -> dict:
-    from scipy.optimize import least_squares
-
     from geoback.identification import prepare
 
     c0, t0 = time.process_time(), time.perf_counter()
     problem = prepare(loaded)
-    misfit = problem.misfit  # the same readings and whitening as geoback
-    sim = problem.simulation
-    p0 = problem.parameters.initial.copy()
-    scale = np.abs(p0)
-    calls = {"n": 0}
-
-    def fun(z):
-        calls["n"] += 1
-        sim.release()  # an external code refactorises for every forward run
-        return misfit.evaluate(z * scale).r
-
-    lo, hi = problem.parameters.lower / scale, problem.parameters.upper / scale
+    sim = problem.simulation  # the same readings and whitening as geoback
     t1 = time.perf_counter()
-    if ls_method == "lm":
-        ls = least_squares(fun, p0 / scale, jac="2-point", method="lm")
-    else:
-        ls = least_squares(fun, p0 / scale, jac="2-point", method=ls_method, bounds=(lo, hi))
+    fd = fd_least_squares(problem.misfit, problem.parameters, method=ls_method)
+    ls = fd["ls"]
     t2, cpu = time.perf_counter(), time.process_time() - c0
-    J = ls.jac / scale
+    J = fd["jacobian"]
     cov = np.linalg.inv(J.T @ J)
     sim.release()
-    return dict(seconds=t2 - t0, cpu=cpu, fit_seconds=t2 - t1, p=ls.x * scale, status=ls.message, success=ls.success,
-                calls=calls["n"], factorisations=sim.counters.factorisations, solves=sim.counters.solves,
+    return dict(seconds=t2 - t0, cpu=cpu, fit_seconds=t2 - t1, p=fd["p"], status=ls.message, success=ls.success,
+                calls=fd["calls"], factorisations=sim.counters.factorisations, solves=sim.counters.solves,
                 nfev=ls.nfev, njev=ls.njev, covariance=cov, dofs=sim.dofs)
 
 

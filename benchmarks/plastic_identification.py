@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from fd_loop import fd_least_squares  # noqa: E402
 from table import print_table
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -107,28 +108,11 @@ def run_geoback(loaded, measured) -> dict:
 
 
 def run_scipy(loaded, measured) -> dict:
-    from scipy.optimize import least_squares
-
     a, setup = fresh(loaded, measured)
-    misfit, sim = a.misfit, a.simulation
-    p0 = a.parameters.initial.copy()
-    scale = np.abs(p0)
-    calls = {"n": 0, "failed": 0}
-
-    def fun(z):
-        calls["n"] += 1
-        sim.release()  # an external code remembers nothing between runs
-        try:
-            return misfit.evaluate(z * scale).r
-        except Exception:  # noqa: BLE001 - a forward run that fails: a large residual, as wrappers do
-            calls["failed"] += 1
-            return np.full(misfit.m, 1e6)
-
-    lo, hi = a.parameters.lower / scale, a.parameters.upper / scale
-    t0 = time.perf_counter()
-    ls = least_squares(fun, p0 / scale, jac="2-point", method="trf", bounds=(lo, hi))
-    seconds = time.perf_counter() - t0
-    return dict(seconds=seconds, setup=setup, p=ls.x * scale, calls=calls["n"], failed=calls["failed"],
+    sim = a.simulation
+    fd = fd_least_squares(a.misfit, a.parameters, tolerate_failures=True)  # nothing remembered between runs
+    ls = fd["ls"]
+    return dict(seconds=fd["seconds"], setup=setup, p=fd["p"], calls=fd["calls"], failed=fd["failed"],
                 nfev=ls.nfev, njev=ls.njev, factorisations=sim.counters.factorisations, solves=sim.counters.solves,
                 forward_runs=sim.counters.forward_runs, success=ls.success, J=float(ls.fun @ ls.fun))
 
