@@ -3,7 +3,7 @@ run and against a finite-difference loop on the same model.
 
 The shipped case cases/staged-tunnel.yaml (release 50 % assumed, shotcrete lining, release the rest;
 inclinometer, extensometer and settlement points read after both stages) with its element sizes
-divided by --scale (default 4: ~50 k DOFs, the lining's ring on ~500 wall dofs). Timed warm (the
+divided by --scale (default 4: ~26 k DOFs, the lining's ring on ~500 wall dofs). Timed warm (the
 mesh cached, one untimed warm-up of everything), each on a fresh simulation (FE model assembled,
 nothing factorised):
 
