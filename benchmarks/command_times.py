@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def timed(args: list[str]) -> float:
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "geoback.cli", *args], check=False, capture_output=True)
+    subprocess.run([sys.executable, "-m", "geoback.commands.cli", *args], check=False, capture_output=True)
     return time.perf_counter() - t0
 
 

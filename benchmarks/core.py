@@ -10,7 +10,7 @@ Rows:
                       (floor 0.5), median of --repeat runs
   plots               `geoback run --plots` / `geoback run` on a two-layer case (floor 2), medians
   Monte Carlo         1000 replicate identifications on the paper mesh through
-                      geoback.identification.identify_replicates: CPU seconds (floor 3)
+                      geoback.inference.identification.identify_replicates: CPU seconds (floor 3)
 
 The mesh cache is warmed before anything is timed (meshing happens once per case). Peak memory is
 each child's maximum resident set.
@@ -53,8 +53,8 @@ def case_file(folder: Path, sizes, name: str) -> Path:
 def two_layer_case(folder: Path) -> Path:
     """The paper geometry with a stiffer marl below 9 m, E of both and K0 identified (readings from a
     mesh twice as fine, no noise)."""
-    from geoback.case import load_case
-    from geoback.simulate import synthetic_readings
+    from geoback.case.loading import load_case
+    from geoback.inference.synthetic import synthetic_readings
 
     data = yaml.safe_load(PAPER.read_text())
     data["name"] = "two-layers"
@@ -84,14 +84,14 @@ def cpu() -> float:
 # ---------------------------------------------------------------------------- children
 def child_identify(path: str) -> dict:
     """prepare + identify in process; then one forward solve from scratch for the ratio."""
-    from geoback.case import load_case
-    from geoback.identification import identify, prepare
-    from geoback.mesh import build_mesh
+    from geoback.case.loading import load_case
+    from geoback.inference.identification import identify, prepare
+    from geoback.physics.mesh import build_mesh
 
     import numpy as np
     import scipy.sparse as sp
 
-    from geoback.solver import Factorisation
+    from geoback.physics.solver import Factorisation
 
     loaded = load_case(path, allow_large=True)
     build_mesh(loaded.case, allow_large=True)  # warm cache
@@ -134,8 +134,8 @@ def child_identify(path: str) -> dict:
 def child_mc(path: str, n: int) -> dict:
     import numpy as np
 
-    from geoback.case import load_case
-    from geoback.identification import identify_replicates, prepare
+    from geoback.case.loading import load_case
+    from geoback.inference.identification import identify_replicates, prepare
 
     analysis = prepare(load_case(path))
     data = analysis.misfit.data
@@ -171,7 +171,7 @@ def command(args: list[str], repeat: int) -> tuple[float, float]:
 
 def geoback(*args) -> list[str]:
     exe = Path(sys.executable).with_name("geoback")
-    return ([str(exe)] if exe.exists() else [sys.executable, "-m", "geoback.cli"]) + [str(a) for a in args]
+    return ([str(exe)] if exe.exists() else [sys.executable, "-m", "geoback.commands.cli"]) + [str(a) for a in args]
 
 
 # ---------------------------------------------------------------------------- main

@@ -36,7 +36,7 @@ The staged kinds and yielding are ground physics; --staged N draws the three sta
 Causes: integration-constant, bias-shift and depth-offset are instrument error, the others ground
 physics; a case is also scored by cause (instrument error / ground physics / nothing).
 
-Readings are those of the truth on a mesh twice as fine (geoback.simulate.synthetic_readings,
+Readings are those of the truth on a mesh twice as fine (geoback.commands.simulate.synthetic_readings,
 refine = 2) with noise drawn from each instrument's C_x (random seed); the case given to
 `diagnose` describes only the baseline model (E and K0 identified). Everything is drawn from
 one master seed (--seed), so the benchmark is reproducible.
@@ -388,7 +388,7 @@ def _staged_noise(clean: np.ndarray, analysis, seed: int) -> np.ndarray:
 
 def _with_noise(clean: dict, loaded, seed: int) -> dict:
     """Noise drawn from each instrument's C_x, as synthetic_readings(noise_seed=seed) draws it."""
-    from geoback.instruments import case_blocks
+    from geoback.observation.instruments import case_blocks
 
     rng = np.random.default_rng(seed)
     return {b.name: clean[b.name] + np.linalg.cholesky(b.covariance) @ rng.standard_normal(b.m)
@@ -397,11 +397,11 @@ def _with_noise(clean: dict, loaded, seed: int) -> dict:
 
 def run_one(spec: dict, folder: str, show: bool = False) -> dict:
     """Truth readings, effect size, raw movement, and the diagnosis of one case."""
-    from geoback.case import LoadedCase, case_from_data
+    from geoback.case.loading import LoadedCase, case_from_data
     from geoback.diagnosis import diagnose
-    from geoback.estimate import fit
-    from geoback.identification import prepare
-    from geoback.simulate import synthetic_readings
+    from geoback.inference.estimate import fit
+    from geoback.inference.identification import prepare
+    from geoback.inference.synthetic import synthetic_readings
 
     row = {k: "" for k in COLUMNS}
     row.update(case=spec["data"]["name"], kind=spec["kind"], parameter=spec["parameter"], cause=cause_of(spec["kind"]),
@@ -438,7 +438,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         d = diagnose(problem)
         row["seconds"] = time.perf_counter() - t0
         if show:
-            from geoback.diagnosis import diagnosis_text
+            from geoback.reports.diagnosis_report import diagnosis_text
 
             print(diagnosis_text(d))
 

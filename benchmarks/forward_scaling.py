@@ -62,11 +62,11 @@ def child(h: float, backend: str) -> dict:
     """One forward run in this (fresh) process; returns the measurements."""
     import numpy as np
 
-    from geoback.case import case_from_data
-    from geoback.fem import FEModel
-    from geoback.ground import plane_strain_isotropic
-    from geoback.mesh import build_mesh
-    from geoback.solver import Factorisation
+    from geoback.case.loading import case_from_data
+    from geoback.physics.fem import FEModel
+    from geoback.physics.ground import plane_strain_isotropic
+    from geoback.physics.mesh import build_mesh
+    from geoback.physics.solver import Factorisation
 
     out: dict = {"h": h, "backend": backend}
     case = case_from_data(case_data(h), allow_large=True)  # up to 700 k DOFs on purpose
@@ -141,7 +141,7 @@ def main(argv=None) -> int:
         print(json.dumps(child(float(args.child[0]), args.child[1])))
         return 0
 
-    from geoback.solver import available_backends
+    from geoback.physics.solver import available_backends
 
     backends = available_backends()
     rows = []

@@ -4,7 +4,7 @@ The paper case (cases/tunnel-paper.yaml: E, K0 from inclinometer I1 and extensom
 readings and its weighting) with both element sizes divided by --scale (default 11.6: about
 100 k DOFs). Two ways to identify E and K0 from E = 5 MPa, K0 = 0.5:
 
-  geoback    the library path of `geoback run` (geoback.identification.run_case: mesh from the
+  geoback    the library path of `geoback run` (geoback.inference.identification.run_case: mesh from the
              cache, assembly, LM fit with exact sensitivities, reliability, and every output file
              of `geoback run`, field.vtu included) into a temporary folder. No subprocess: the
              CLI adds only its start-up (imports) to this.
@@ -42,7 +42,7 @@ FLOOR_FACTORISATIONS, FLOOR_TIME = 10.0, 5.0
 
 
 def loaded_case(scale: float):
-    from geoback.case import LoadedCase, case_from_data
+    from geoback.case.loading import LoadedCase, case_from_data
 
     with open(PAPER_CASE, encoding="utf-8") as fh:
         data = yaml.safe_load(fh)
@@ -54,7 +54,7 @@ def loaded_case(scale: float):
 
 
 def run_geoback(loaded) -> dict:
-    from geoback.run import run_case
+    from geoback.commands.run import run_case
 
     with tempfile.TemporaryDirectory() as out:
         c0, t0 = time.process_time(), time.perf_counter()
@@ -72,7 +72,7 @@ def run_geoback(loaded) -> dict:
 
 
 def run_scipy(loaded, ls_method: str) -> dict:
-    from geoback.identification import prepare
+    from geoback.inference.identification import prepare
 
     c0, t0 = time.process_time(), time.perf_counter()
     problem = prepare(loaded)
@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     if args.backend:
         os.environ["GEOBACK_SOLVER"] = args.backend
-    from geoback.mesh import build_mesh
+    from geoback.physics.mesh import build_mesh
 
     loaded = loaded_case(args.scale)
     t0 = time.perf_counter()

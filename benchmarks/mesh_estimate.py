@@ -4,14 +4,14 @@ Part 1 (default): for a spread of cases (radius 1-12 m, shallow to deep, narrow 
 domains, wall sizes R/4-R/60, far sizes domain/4-domain/300, growth 0.08-1, one to three layers,
 with and without refinement along the paper case's instruments, linear and quadratic
 elements) mesh with gmsh (no cache) and compare the number of triangles with
-:func:`geoback.meshsize.estimate`. Prints a table and the ratio's range; exits 1 when a ratio
+:func:`geoback.case.meshsize.estimate`. Prints a table and the ratio's range; exits 1 when a ratio
 falls outside [1/FACTOR, FACTOR]. (A growth above 1 with refinement around instruments is
 over-estimated, by up to 60 % at the schema's maximum 2: gmsh cannot follow so steep a field
 around small refined zones; the estimate errs on the safe side there.)
 
 Part 2 (``--costs``): peak memory (ru_maxrss of a fresh process) and wall time of
 ``geoback validate`` and ``geoback run`` on the paper case meshed ever finer, to fit the
-memory model of :mod:`geoback.meshsize` and choose its default limit.
+memory model of :mod:`geoback.case.meshsize` and choose its default limit.
 
     python benchmarks/mesh_estimate.py            # part 1 (about a minute)
     python benchmarks/mesh_estimate.py --costs    # part 2 (several minutes)
@@ -76,9 +76,10 @@ def variants() -> list[tuple[str, dict]]:
 
 
 def compare(only_small: bool = False) -> list[dict]:
-    from geoback.case import case_from_data
-    from geoback.mesh import _run_gmsh, mesh_inputs
-    from geoback.meshsize import estimate
+    from geoback.case.loading import case_from_data
+    from geoback.case.meshsize import mesh_inputs
+    from geoback.physics.mesh import _run_gmsh
+    from geoback.case.meshsize import estimate
 
     rows = []
     for label, data in variants():
@@ -108,9 +109,9 @@ def _measure(cmd: list[str], env: dict) -> tuple[float, float, int]:
 
 def costs(sizes: list[float]) -> list[dict]:
     """validate and run of the paper case with size_far = h, size_tunnel = h/4 (fresh cache each)."""
-    from geoback.case import case_from_data
-    from geoback.mesh import mesh_inputs
-    from geoback.meshsize import estimate
+    from geoback.case.loading import case_from_data
+    from geoback.case.meshsize import mesh_inputs
+    from geoback.case.meshsize import estimate
 
     rows = []
     base = yaml.safe_load(PAPER.read_text())
@@ -122,7 +123,7 @@ def costs(sizes: list[float]) -> list[dict]:
             path = Path(tmp) / "case.yaml"
             path.write_text(yaml.safe_dump(data))
             env = dict(os.environ, GEOBACK_CACHE=str(Path(tmp) / "cache"))
-            geoback = [sys.executable, "-m", "geoback.cli"]
+            geoback = [sys.executable, "-m", "geoback.commands.cli"]
             v_cold = _measure(geoback + ["validate", str(path), "--allow-large"], env)
             v_warm = _measure(geoback + ["validate", str(path), "--allow-large"], env)
             r = _measure(geoback + ["run", str(path), "--allow-large", "-q", "--out", str(Path(tmp) / "out")], env)

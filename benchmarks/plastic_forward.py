@@ -34,9 +34,9 @@ def main(argv=None):
     ap.add_argument("--backend", default=None, help="pardiso | scipy (default: pardiso if installed)")
     args = ap.parse_args(argv)
 
-    from geoback.plasticity import Material, Options, ParameterDerivative, solve
-    from geoback.plasticity.deep_tunnel import deep_tunnel_model, hydrostatic_load
-    from geoback.plasticity.operators import PointOperators
+    from geoback.physics.plasticity import Material, Options, ParameterDerivative, solve
+    from geoback.physics.plasticity.deep_tunnel import deep_tunnel_model, hydrostatic_load
+    from geoback.physics.plasticity.operators import PointOperators
 
     t0 = time.perf_counter()
     fe = deep_tunnel_model(L=50.0, size_tunnel=args.size, growth=args.growth)
@@ -64,7 +64,7 @@ def main(argv=None):
     cd = res_d.counters
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # MiB (Linux: KiB)
 
-    from geoback.plasticity.linear import default_backend
+    from geoback.physics.plasticity.linear import default_backend
 
     print(f"DOFs {fe.nfree}   quadrature points {ops.npts}   psi {args.psi:g} deg   "
           f"backend {opts.backend or default_backend(fe.nfree)}   "

@@ -53,7 +53,7 @@ FLOOR_RATIO, FLOOR_FORWARD = 5.0, 20.0
 
 
 def loaded_case(scale: float, psi: float):
-    from geoback.case import LoadedCase, case_from_data
+    from geoback.case.loading import LoadedCase, case_from_data
 
     data = copy.deepcopy(yaml.safe_load(CASE.read_text(encoding="utf-8")))
     data["name"] = f"plastic-tunnel-x{scale:g}"
@@ -67,8 +67,8 @@ def loaded_case(scale: float, psi: float):
 
 def readings(loaded) -> np.ndarray:
     """The truth's readings on this mesh plus noise from each C_x (survey order)."""
-    from geoback.identification import prepare
-    from geoback.misfit import Data
+    from geoback.inference.identification import prepare
+    from geoback.inference.misfit import Data
 
     a = prepare(loaded, with_readings=False)
     sim = a.simulation
@@ -77,7 +77,7 @@ def readings(loaded) -> np.ndarray:
 
 
 def fresh(loaded, measured):
-    from geoback.identification import prepare
+    from geoback.inference.identification import prepare
 
     t0 = time.perf_counter()
     a = prepare(loaded, with_readings=False)
@@ -97,7 +97,7 @@ def forward(loaded, measured, sensitivities: bool) -> dict:
 
 
 def run_geoback(loaded, measured) -> dict:
-    from geoback.identification import identify
+    from geoback.inference.identification import identify
 
     a, setup = fresh(loaded, measured)
     t0 = time.perf_counter()
@@ -132,7 +132,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--repeat", type=int, default=1, help="runs of each measurement (median reported)")
     ap.add_argument("--csv", type=Path, default=None, help="also write the table as CSV")
     args = ap.parse_args(argv)
-    from geoback.mesh import build_mesh
+    from geoback.physics.mesh import build_mesh
 
     loaded = loaded_case(args.scale, args.psi)
     t0 = time.perf_counter()

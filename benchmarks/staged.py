@@ -42,7 +42,7 @@ FLOOR_RATIO = 3.0
 
 
 def loaded_case(scale: float):
-    from geoback.case import LoadedCase, case_from_data
+    from geoback.case.loading import LoadedCase, case_from_data
 
     data = copy.deepcopy(yaml.safe_load(CASE.read_text(encoding="utf-8")))
     data["name"] = f"staged-tunnel-x{scale:g}"
@@ -52,7 +52,7 @@ def loaded_case(scale: float):
 
 
 def fresh(loaded):
-    from geoback.identification import prepare
+    from geoback.inference.identification import prepare
 
     t0 = time.perf_counter()
     a = prepare(loaded)
@@ -76,7 +76,7 @@ def forward(loaded, direct: bool = False) -> dict:
 
 
 def run_geoback(loaded) -> dict:
-    from geoback.identification import identify
+    from geoback.inference.identification import identify
 
     a, setup = fresh(loaded)
     t0 = time.perf_counter()
@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> dict:
     args = ap.parse_args(argv)
     if args.backend:
         os.environ["GEOBACK_SOLVER"] = args.backend
-    from geoback.mesh import build_mesh
+    from geoback.physics.mesh import build_mesh
 
     loaded = loaded_case(args.scale)
     t0 = time.perf_counter()

@@ -10,9 +10,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from geoback.identification import prepare
-from geoback.parameters import resolve_values
-from geoback.simulate import refined_case, synthetic_readings, without_readings, write_readings_csv
+from geoback.inference.identification import prepare
+from geoback.inference.parameters import resolve_values
+from geoback.case.meshsize import refined_case
+from geoback.commands.simulate import without_readings, write_readings_csv
+from geoback.inference.synthetic import synthetic_readings
 
 HERE = Path(__file__).resolve().parent
 CASE = HERE / "plastic-tunnel.yaml"

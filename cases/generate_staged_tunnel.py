@@ -12,7 +12,8 @@ import argparse
 from pathlib import Path
 
 from geoback.outputs import write_csv
-from geoback.simulate import synthetic_readings, without_readings
+from geoback.commands.simulate import without_readings
+from geoback.inference.synthetic import synthetic_readings
 
 HERE = Path(__file__).resolve().parent
 CASE = HERE / "staged-tunnel.yaml"

@@ -64,7 +64,7 @@ def run(realisations: int, small: bool = False, seed: int = 0, data_mesh: str = 
     # discretisation bias of the fitting mesh, in std of the estimate and as implied coverage
     from scipy import stats
 
-    from geoback.identification import identify_replicates
+    from geoback.inference.identification import identify_replicates
 
     problem = problem.with_readings(clean)
     f0, rel0 = C.identify_p(problem, "full")

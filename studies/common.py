@@ -3,14 +3,14 @@
 The studies start from the paper case (``cases/tunnel-paper.yaml``: R = 3 m, axis depth 10 m,
 nu = 0.49, gamma = 20 kN/m3, truth E = 10 MPa, K0 = 1, start E = 5 MPa, K0 = 0.5) and change
 only the instrument layout, the measurement errors and the mesh size.  Every helper works on
-plain case dicts (validated by ``geoback.case.case_from_data``), so a study states in a few
+plain case dicts (validated by ``geoback.case.loading.case_from_data``), so a study states in a few
 lines which instruments it uses.
 
 Conventions of the studies
 --------------------------
 * Truth: the ground values of the paper case (E = 10 MPa, K0 = 1).
 * Readings without the inverse crime: noise-free readings come from the same case meshed
-  ``refine`` times finer (``geoback.simulate.synthetic_readings``), noise is added by the study.
+  ``refine`` times finer (``geoback.commands.simulate.synthetic_readings``), noise is added by the study.
 * One prepared case per layout and mesh: the noise realisations only change its readings
   (``Analysis.with_readings``); the factorisation of k (K = E k) is reused by every fit.
 """
@@ -67,7 +67,7 @@ def case_dict(instruments: list[dict] | None = None, mesh_scale: float = 1.0, na
 
 def loaded_case(data: dict):
     """Validate a case dict and wrap it as a LoadedCase (no file behind it)."""
-    from geoback.case import LoadedCase, case_from_data
+    from geoback.case.loading import LoadedCase, case_from_data
 
     return LoadedCase(case_from_data(data), None, {})
 
@@ -121,15 +121,15 @@ def stack(analysis, readings: dict[str, np.ndarray]) -> np.ndarray:
 
 def fine_readings(loaded, refine: float = 2.0) -> dict[str, np.ndarray]:
     """Noise-free readings at the truth, computed on a mesh `refine` times finer."""
-    from geoback.simulate import synthetic_readings
+    from geoback.inference.synthetic import synthetic_readings
 
     return synthetic_readings(loaded, refine=refine)
 
 
 def problem_with(loaded, measured: np.ndarray | None = None, weighting: str | None = None):
-    """The case prepared (geoback.identification.prepare) with the readings `measured` (survey order);
+    """The case prepared (geoback.inference.identification.prepare) with the readings `measured` (survey order);
     the truth's own noise-free predictions if none are given."""
-    from geoback.identification import prepare
+    from geoback.inference.identification import prepare
 
     analysis = prepare(loaded, with_readings=False)
     if measured is None:
@@ -144,7 +144,7 @@ def noise_from_cx(analysis, rng: np.random.Generator, scale: float = 1.0) -> np.
 
 def identify_p(analysis, weighting: str, p0=None):
     """Fit and assess on the analysis' readings; returns (Fit, Reliability)."""
-    from geoback.identification import identify
+    from geoback.inference.identification import identify
 
     res = identify(analysis, weighting=weighting, p0=p0, require_dof=False)
     return res.fit, res.reliability

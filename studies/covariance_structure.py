@@ -42,7 +42,7 @@ def case_data(mesh_scale: float) -> dict:
 
 def slope_noise(rng: np.random.Generator, lengths: np.ndarray) -> np.ndarray:
     """Slope errors integrated from the toe, eqn 15 (B exactly known: zero)."""
-    from geoback.covariance import integration_matrix
+    from geoback.case.covariance import integration_matrix
 
     alpha = rng.normal(0.0, SIGMA_ALPHA, len(lengths))
     return integration_matrix("inclinometer", lengths) @ alpha

@@ -41,8 +41,8 @@ def _with_candidate(data: dict, candidate: dict, readings: list[float], stage: s
 
 
 def _rms_std(loaded, targets: list[str]) -> float:
-    from geoback.forecast import forecast
-    from geoback.identification import identify, prepare
+    from geoback.worth.forecast import forecast
+    from geoback.inference.identification import identify, prepare
 
     analysis = prepare(loaded)
     res = identify(analysis, profile="none")
@@ -52,12 +52,12 @@ def _rms_std(loaded, targets: list[str]) -> float:
 
 
 def run(top: int | None = 3, seeds: int = 5) -> list[dict]:
-    from geoback.case import LoadedCase, case_from_data, load_case
-    from geoback.case_checks import expand_candidates
-    from geoback.design import design
-    from geoback.identification import identify, prepare
-    from geoback.instruments import build_block
-    from geoback.simulate import refined_case
+    from geoback.case.loading import LoadedCase, case_from_data, load_case
+    from geoback.case.checks import expand_candidates
+    from geoback.worth.design import design
+    from geoback.inference.identification import identify, prepare
+    from geoback.observation.instruments import build_block
+    from geoback.case.meshsize import refined_case
 
     loaded = load_case(CASE)
     analysis = prepare(loaded)
@@ -66,7 +66,7 @@ def run(top: int | None = 3, seeds: int = 5) -> list[dict]:
     data = loaded.case.model_dump(exclude_none=True, mode="json")
     for ins in data["instruments"]:  # the readings file resolved to values, so the case can live in memory
         ins.pop("readings_file", None)
-    from geoback.readings import survey_blocks
+    from geoback.observation.readings import survey_blocks
 
     blocks, measured = survey_blocks(loaded, [s.name for s in loaded.case.construction.stages])
     start = 0

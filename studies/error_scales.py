@@ -55,7 +55,7 @@ def case_data(layout: str) -> dict:
 
 
 def run(layout: str, realisations: int, seed: int) -> dict:
-    from geoback.identification import identify_replicates, prepare
+    from geoback.inference.identification import identify_replicates, prepare
 
     data = case_data(layout)
     loaded = C.loaded_case(data)
@@ -93,7 +93,7 @@ SCALE_HEADER = ["layout", "instrument", "true_k", "readings", "mean_k2", "se_mea
 
 
 def summarise(res: dict) -> tuple[list[dict], list[dict]]:
-    from geoback.scale_estimates import chi2_ppf
+    from geoback.inference.scale_estimates import chi2_ppf
 
     N = res["N"]
     rows, scale_rows = [], []

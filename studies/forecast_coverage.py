@@ -64,7 +64,7 @@ def paper_case(mesh_scale: float = 1.0):
 
 
 def staged_case():
-    from geoback.case import load_case
+    from geoback.case.loading import load_case
 
     loaded = load_case(C.ROOT / "cases" / "staged-forecast.yaml")
     data = loaded.case.model_dump(exclude_none=True)
@@ -89,7 +89,7 @@ def plastic_truth() -> dict:
 def plastic_case(mesh_scale: float = 1.0):
     """cases/plastic-tunnel.yaml without its readings, with the trough over the case's width and the
     crown's settlement forecast at the last stage, meshed `mesh_scale` times finer."""
-    from geoback.case import load_case
+    from geoback.case.loading import load_case
 
     loaded = load_case(C.ROOT / "cases" / "plastic-tunnel.yaml")
     data = loaded.case.model_dump(exclude_none=True)
@@ -113,7 +113,7 @@ def _chunk(rows: np.ndarray):
     """Fit, C_p, forecast and its std of the replicates `rows` (run in a worker)."""
     from threadpoolctl import threadpool_limits
 
-    from geoback.identification import identify_replicates
+    from geoback.inference.identification import identify_replicates
 
     problem, model, names, p0 = _JOB["problem"], _JOB["model"], _JOB["names"], _JOB["p0"]
     noisy = _JOB["noisy"][rows]
@@ -159,10 +159,10 @@ def _replicates(problem, model, names, noisy, p0, nq, workers: int, progress=Non
 
 def run(replicates: int, which: str = "paper", seed: int = 1, workers: int = 1, mesh_scale: float = 1.0,
         progress=None) -> dict:
-    from geoback.forecast import forecast_model
-    from geoback.identification import identify, identify_replicates, prepare
-    from geoback.parameters import resolve_values
-    from geoback.simulate import refined_case
+    from geoback.worth.forecast import forecast_model
+    from geoback.inference.identification import identify, identify_replicates, prepare
+    from geoback.inference.parameters import resolve_values
+    from geoback.case.meshsize import refined_case
 
     loaded = {"paper": paper_case, "staged": staged_case, "plastic": lambda: plastic_case(mesh_scale)}[which]()
     coarse = prepare(loaded, with_readings=False)

@@ -43,11 +43,11 @@ from pathlib import Path
 
 import numpy as np
 
-import geoback.mesh as gmesh
-from geoback.case import case_from_data
-from geoback.fem import FEModel
-from geoback.ground import plane_strain_isotropic
-from geoback.solver import Factorisation
+import geoback.physics.mesh as gmesh
+from geoback.case.loading import case_from_data
+from geoback.physics.fem import FEModel
+from geoback.physics.ground import plane_strain_isotropic
+from geoback.physics.solver import Factorisation
 
 OUT = Path(__file__).resolve().parent / "out"
 R, L = 1.0, 1.0e4

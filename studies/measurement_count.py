@@ -51,7 +51,7 @@ def layouts(sigma: float) -> dict[int, list[dict]]:
 
 def std_at_truth(problem) -> tuple[np.ndarray, object]:
     """std of the parameters from C_p at the truth (reliability module, full C_x = sigma^2 I)."""
-    from geoback.reliability import assess
+    from geoback.inference.reliability import assess
 
     at_truth = problem.with_readings(problem.predict(C.P_TRUE).x, "full").misfit
     rel = assess(at_truth.evaluate(C.P_TRUE, jacobian=True), at_truth.parameters, at_truth.logdet)

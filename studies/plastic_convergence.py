@@ -8,7 +8,7 @@ also at lambda = 0.9. Closed form: R_p = 1.768 R at full release; with nu = 0.4 
 stays intermediate in the plastic zone (the closed form's assumption; with nu = 0.3 it would become
 the major stress at the wall and the comparison would not be like for like).
 
-Measured (geoback.plasticity.deep_tunnel.measure): plastic radius from the crossing of the FE
+Measured (geoback.physics.plasticity.deep_tunnel.measure): plastic radius from the crossing of the FE
 radial stress with -p_cr, and the mean radial wall displacement.
 
 Refinement series: element size at the wall ``size_tunnel`` and growth rate halved together
@@ -32,10 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
-from geoback.plasticity import DeepTunnelMC, Material, solve
-from geoback.plasticity.deep_tunnel import deep_tunnel_model, hydrostatic_load, measure
-from geoback.plasticity.incremental import NonConvergence
-from geoback.plasticity.operators import PointOperators
+from geoback.physics.plasticity import DeepTunnelMC, Material, solve
+from geoback.physics.plasticity.deep_tunnel import deep_tunnel_model, hydrostatic_load, measure
+from geoback.physics.plasticity.incremental import NonConvergence
+from geoback.physics.plasticity.operators import PointOperators
 
 OUT = Path(__file__).resolve().parent / "out"
 P0, E, NU, C, PHI = 1000.0, 1.0e5, 0.4, 110.0, 30.0

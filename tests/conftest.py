@@ -42,7 +42,7 @@ def paper_case_path() -> Path:
 
 def central_difference_error(analysis, p, A, j: int, h: float) -> float:
     """Relative difference between column j of the exact sensitivity A = dx/dp at p and the
-    central finite difference with step h (analysis: a prepared case, geoback.identification)."""
+    central finite difference with step h (analysis: a prepared case, geoback.inference.identification)."""
     import numpy as np
 
     up, down = p.copy(), p.copy()

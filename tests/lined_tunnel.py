@@ -16,7 +16,7 @@ conditions. Displacements from Barber, Elasticity, Table 8.1 (kappa = 3 - 4 nu),
 `check_michell` below.
 
 Thrust N = -int sigma_tt dr (compression +), moment M = int sigma_tt (r_c - r) dr about the
-centreline r_c = (a + R)/2 (intrados in tension +), as in geoback.lining.
+centreline r_c = (a + R)/2 (intrados in tension +), as in geoback.physics.lining.
 """
 from __future__ import annotations
 

@@ -28,7 +28,7 @@ def _peak():
         pass
 atexit.register(_peak)
 sys.argv[0] = 'geoback'
-from geoback.cli import app
+from geoback.commands.cli import app
 app()
 """
 
@@ -77,9 +77,9 @@ def _reset_hwm():
     except OSError:
         return False
 
-from geoback.case import load_case
+from geoback.case.loading import load_case
 from geoback.errors import CaseError, GeobackError
-from geoback.validation import check_case
+from geoback.commands.validation import check_case
 
 for line in sys.stdin:
     path = line.rstrip('\n')

@@ -29,9 +29,9 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from geoback.case import case_from_data, load_case
+from geoback.case.loading import case_from_data, load_case
 from geoback.errors import CaseError, GeobackError
-from geoback.identification import prepare
+from geoback.inference.identification import prepare
 
 ROOT = Path(__file__).resolve().parents[1]
 BAD = ROOT / "tests" / "data" / "bad"
@@ -44,7 +44,7 @@ LINE_RE = re.compile(r"^error: (?P<file>.+?):(?P<line>\d+):(?P<column>\d+): (?P<
 
 def _cli_commands() -> list[str]:
     """`validate`, plus `run` once the CLI has it."""
-    from geoback.cli import app
+    from geoback.commands.cli import app
 
     names = {c.name or c.callback.__name__ for c in app.registered_commands}
     return [c for c in ("validate", "run") if c in names]
@@ -66,7 +66,7 @@ def _run_cli(command: str, path: Path, workdir: Path) -> subprocess.CompletedPro
     env = dict(os.environ)
     env.pop("GEOBACK_DEBUG", None)
     env["GEOBACK_CACHE"] = str(workdir / "cache")
-    return subprocess.run([sys.executable, "-m", "geoback.cli", command, str(path)], cwd=workdir, env=env,
+    return subprocess.run([sys.executable, "-m", "geoback.commands.cli", command, str(path)], cwd=workdir, env=env,
                           capture_output=True, text=True, timeout=300)
 
 

@@ -11,12 +11,12 @@ from pathlib import Path
 import pytest
 import yaml
 
-from geoback.batch import collect_cases, output_folders, run_batch, summary_table
+from geoback.commands.batch import collect_cases, output_folders, run_batch, summary_table
 from geoback.errors import GeobackError
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "cases" / "tunnel-paper.yaml"
-GEOBACK = [sys.executable, "-m", "geoback.cli"]
+GEOBACK = [sys.executable, "-m", "geoback.commands.cli"]
 
 
 @pytest.fixture(scope="module")

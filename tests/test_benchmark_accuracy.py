@@ -32,7 +32,7 @@ def test_plastic_cohesion_is_the_closed_form_of_the_concealed_case(bench):
 
 
 def test_opt_in_cases_are_valid_and_reproducible(bench, tmp_path):
-    from geoback.case import case_from_data
+    from geoback.case.loading import case_from_data
 
     for i, kind in enumerate(bench.STAGED_KINDS + ["null-staged"]):
         a, b = bench.random_staged_case(i, kind, 7), bench.random_staged_case(i, kind, 7)

@@ -13,7 +13,7 @@ PAPER = CASES / "tunnel-paper.yaml"
 
 
 def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "geoback.cli", *map(str, args)], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "geoback.commands.cli", *map(str, args)], capture_output=True, text=True,
                           timeout=300, cwd=cwd)
 
 

@@ -1,4 +1,4 @@
-"""Tests of geoback.covariance (Ledesma, Gens & Alonso 1996, eqns 10-26 + ERRATA)."""
+"""Tests of geoback.case.covariance (Ledesma, Gens & Alonso 1996, eqns 10-26 + ERRATA)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.linalg import cho_factor, cho_solve
 
-from geoback.covariance import (
+from geoback.case.covariance import (
     KINDS,
     NotPositiveDefinite,
     cholesky_factor,

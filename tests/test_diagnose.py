@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from conftest import CASES
-from geoback.case import load_case
+from geoback.case.loading import load_case
 from geoback.diagnosis import diagnose
 
 CONCEALED = CASES / "concealed"
@@ -49,8 +49,8 @@ def test_concealed_effect_is_named_estimated_and_fixes_the_fit(name):
 
 
 def test_bias_shift_is_named_as_instrument_error_in_words_and_json(tmp_path):
-    from geoback.diagnosis import write_diagnosis
-    from geoback.diagnosis.report import verdict
+    from geoback.reports.diagnosis_report import write_diagnosis
+    from geoback.reports.diagnosis_report import verdict
 
     d = diagnose(load_case(CONCEALED / "bias-shift.yaml"))
     text = verdict(d)
@@ -78,7 +78,7 @@ def test_unlined_stress_release_without_prior_is_reported_as_not_separable():
 
 
 def test_cli_writes_diagnosis_files(tmp_path):
-    out = subprocess.run([sys.executable, "-m", "geoback.cli", "diagnose", str(CONCEALED / "null-1.yaml"),
+    out = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "diagnose", str(CONCEALED / "null-1.yaml"),
                           "--out", str(tmp_path), "-q"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert "No effect the library can detect is missing" in out.stdout  # not "nothing is missing"
@@ -93,7 +93,7 @@ def test_null_case_with_a_moving_model_toe_is_adequate():
     """Inclinometer readings are relative to the toe (as integrated in the field) and the model is
     compared as u(z) - u(toe): where the model's own toe moves by more than 5 mm, a null case is
     still adequate and no 'toe moved' is invented."""
-    from geoback.identification import prepare
+    from geoback.inference.identification import prepare
 
     analysis = prepare(load_case(CONCEALED / "null-1.yaml"))
     sim = analysis.simulation
@@ -110,10 +110,10 @@ def test_two_effects_are_reported_from_the_final_joint_fit(tmp_path):
     and diagnosis.json give each parameter from the final joint fit, not from its round."""
     import numpy as np
 
-    from geoback.diagnosis import write_diagnosis
-    from geoback.diagnosis.report import verdict
-    from geoback.identification import prepare
-    from geoback.simulate import synthetic_readings
+    from geoback.reports.diagnosis_report import write_diagnosis
+    from geoback.reports.diagnosis_report import verdict
+    from geoback.inference.identification import prepare
+    from geoback.inference.synthetic import synthetic_readings
 
     loaded = load_case(CONCEALED / "toe-moved.yaml")
     readings = synthetic_readings(loaded, refine=2.0, values={"B[I1]": 0.004, "bias[I2]": 4e-4}, noise_seed=3)
@@ -148,10 +148,10 @@ def test_deep_rigid_stratum_is_a_tentative_answer():
     import numpy as np
     import yaml
 
-    from geoback.case import LoadedCase, case_from_data
-    from geoback.diagnosis.report import verdict
-    from geoback.identification import prepare
-    from geoback.simulate import synthetic_readings
+    from geoback.case.loading import LoadedCase, case_from_data
+    from geoback.reports.diagnosis_report import verdict
+    from geoback.inference.identification import prepare
+    from geoback.inference.synthetic import synthetic_readings
 
     loaded = load_case(CONCEALED / "null-1.yaml")
     data = yaml.safe_load((CONCEALED / "null-1.yaml").read_text())

@@ -99,10 +99,10 @@ def test_rivals_are_stated_with_the_readings_that_separate_them():
     """Two hypotheses within 2 AIC: a plain statement with their Akaike weights and the readings
     where their predictions differ most relative to sigma."""
     from conftest import CASES
-    from geoback.case import load_case
+    from geoback.case.loading import load_case
     from geoback.diagnosis.compare import separation
-    from geoback.diagnosis.report import rival_sentences
-    from geoback.identification import prepare
+    from geoback.reports.diagnosis_report import rival_sentences
+    from geoback.inference.identification import prepare
 
     data = prepare(load_case(CASES / "concealed" / "null-1.yaml")).misfit.data
     x = np.zeros(data.m)

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from conftest import CASES
-from geoback.case import load_case
+from geoback.case.loading import load_case
 from geoback.diagnosis import diagnose
 from geoback.diagnosis.yielding import MARGIN, PHI, required_cohesion, screen
-from geoback.estimate import fit
-from geoback.identification import prepare
+from geoback.inference.estimate import fit
+from geoback.inference.identification import prepare
 
 CONCEALED = CASES / "concealed"
 
@@ -67,7 +67,7 @@ def test_yielding_is_named_and_the_fit_improves(yielding):
 
 
 def test_diagnosis_text_says_it(yielding):
-    from geoback.diagnosis import diagnosis_text
+    from geoback.reports.diagnosis_report import diagnosis_text
 
     text = diagnosis_text(yielding)
     assert "Missing - Ground physics: the ground yields around the tunnel" in text and "| nan" not in text

@@ -1,4 +1,4 @@
-"""Data worth for telling two hypotheses apart (geoback.discrimination): the linearised growth of
+"""Data worth for telling two hypotheses apart (geoback.worth.discrimination): the linearised growth of
 the wrong hypothesis' chi-square a candidate brings, against refitting it to the readings the true
 one predicts (existing and candidate together)."""
 from __future__ import annotations
@@ -11,14 +11,14 @@ import yaml
 from scipy import stats
 
 from conftest import CASES
-from geoback.case import LoadedCase, case_from_data
-from geoback.case_schema import Parameter
-from geoback.design import candidate_blocks
-from geoback.discrimination import discriminate
-from geoback.estimate import fit
-from geoback.identification import prepare
-from geoback.misfit import Data, Misfit
-from geoback.simulation import make_simulation
+from geoback.case.loading import LoadedCase, case_from_data
+from geoback.case.schema import Parameter
+from geoback.worth.design import candidate_blocks
+from geoback.worth.discrimination import discriminate
+from geoback.inference.estimate import fit
+from geoback.inference.identification import prepare
+from geoback.inference.misfit import Data, Misfit
+from geoback.physics.factory import make_simulation
 
 
 def gradient_case(candidates: list[dict]) -> dict:
@@ -92,7 +92,7 @@ def test_design_separate_ranks_candidates_between_the_leading_hypotheses(tmp_pat
 
     from typer.testing import CliRunner
 
-    from geoback.cli import app
+    from geoback.commands.cli import app
 
     data = gradient_case([
         {"name": "I3", "kind": "inclinometer", "x": 9.0, "toe_depth": 30.0, "spacing": 1.5, "stations": 19,
@@ -119,7 +119,7 @@ def test_design_separate_says_when_there_is_nothing_to_tell_apart(tmp_path):
 
     from typer.testing import CliRunner
 
-    from geoback.cli import app
+    from geoback.commands.cli import app
 
     out = tmp_path / "out"
     result = CliRunner().invoke(app, ["design", str(CASES / "staged-forecast.yaml"), "--separate", "--out", str(out),

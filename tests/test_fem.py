@@ -1,4 +1,4 @@
-"""Verification of the mesh, the FE model and the solver (geoback.mesh, geoback.fem, geoback.solver).
+"""Verification of the mesh, the FE model and the solver (geoback.physics.mesh, geoback.physics.fem, geoback.physics.solver).
 
 Closed forms, structural identities and invariants, no regression numbers:
 
@@ -16,13 +16,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import geoback.mesh as gmesh
-from geoback.case import LoadedCase, case_from_data
-from geoback.fem import FEModel
-from geoback.ground import plane_strain_isotropic
-from geoback.mesh import build_mesh
-from geoback.identification import prepare
-from geoback.solver import Factorisation, available_backends
+import geoback.physics.mesh as gmesh
+from geoback.case.loading import LoadedCase, case_from_data
+from geoback.physics.fem import FEModel
+from geoback.physics.ground import plane_strain_isotropic
+from geoback.physics.mesh import build_mesh
+from geoback.inference.identification import prepare
+from geoback.physics.solver import Factorisation, available_backends
 
 
 # ---------------------------------------------------------------------------- helpers / fixtures
@@ -386,7 +386,7 @@ def test_shape_functions_and_quadrature_rules():
     rules integrate monomials exactly up to their degree (x^a y^b over the triangle: a! b! / (a+b+2)!)."""
     from math import factorial
 
-    from geoback.shapes import Element, line_rule, triangle_rule
+    from geoback.physics.shapes import Element, line_rule, triangle_rule
 
     nodes = {("triangle", 1): [[0, 1, 0], [0, 0, 1]], ("triangle", 2): [[0, 1, 0, .5, .5, 0], [0, 0, 1, 0, .5, .5]],
              ("line", 1): [[0, 1]], ("line", 2): [[0, 1, .5]]}

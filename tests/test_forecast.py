@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from geoback.case import LoadedCase, case_from_data, load_case
-from geoback.forecast import forecast, forecast_model
-from geoback.identification import identify, prepare
-from geoback.simulation import is_constant
+from geoback.case.loading import LoadedCase, case_from_data, load_case
+from geoback.worth.forecast import forecast, forecast_model
+from geoback.inference.identification import identify, prepare
+from geoback.physics.simulation import is_constant
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGED = ROOT / "cases" / "staged-forecast.yaml"
@@ -111,9 +111,9 @@ def test_forecast_band_covers_the_truth_95_percent_on_yielding_ground():
 def test_design_predicts_the_posterior_of_a_fit_with_the_candidate(staged):
     """Readings of the best candidate equal to the model at the estimate: the estimate stays put, so
     the fit's forecast std must be the design's prediction (to rounding)."""
-    from geoback.case_checks import expand_candidates
-    from geoback.design import design
-    from geoback.readings import survey_blocks
+    from geoback.case.checks import expand_candidates
+    from geoback.worth.design import design
+    from geoback.observation.readings import survey_blocks
 
     analysis, res = staged
     d = design(analysis, res)
@@ -131,7 +131,7 @@ def test_design_predicts_the_posterior_of_a_fit_with_the_candidate(staged):
         start += b.m
     ins = cand.model_dump(exclude_none=True, mode="json", exclude={"vary", "read_at"})
     sim = analysis.simulation
-    from geoback.design import candidate_blocks
+    from geoback.worth.design import candidate_blocks
 
     block = next(b for _, c, b in candidate_blocks(loaded, "advance") if c.name == cand.name)
     with sim.surveying([block]) as view:
@@ -169,7 +169,7 @@ def test_prior_posterior_table(staged):
 
 def test_run_and_design_commands(tmp_path):
     env = {"GEOBACK_CACHE": str(tmp_path / "cache"), "PATH": "/usr/bin:/bin"}
-    run = subprocess.run([sys.executable, "-m", "geoback.cli", "run", str(STAGED), "--out", str(tmp_path / "r"),
+    run = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "run", str(STAGED), "--out", str(tmp_path / "r"),
                           "--plots", "-q"], capture_output=True, text=True, env=env, timeout=600)
     assert run.returncode == 0, run.stderr
     out = tmp_path / "r"
@@ -186,11 +186,11 @@ def test_run_and_design_commands(tmp_path):
     assert "## Forecasts" in report and "identifiability" in report
     for name in ("trough", "X1-lined", "shotcrete"):
         assert (out / f"forecast_{name}.png").stat().st_size > 10_000
-    design = subprocess.run([sys.executable, "-m", "geoback.cli", "design", str(STAGED), "--out",
+    design = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "design", str(STAGED), "--out",
                              str(tmp_path / "d")], capture_output=True, text=True, env=env, timeout=600)
     assert design.returncode == 0, design.stderr
     assert "best: I2-x4.5" in design.stdout
     assert (tmp_path / "d" / "design.csv").exists() and (tmp_path / "d" / "design.png").exists()
-    no_design = subprocess.run([sys.executable, "-m", "geoback.cli", "design", str(ROOT / "cases" / "tunnel-paper.yaml"),
+    no_design = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "design", str(ROOT / "cases" / "tunnel-paper.yaml"),
                                 "--out", str(tmp_path / "n")], capture_output=True, text=True, env=env, timeout=600)
     assert no_design.returncode == 2 and "design" in no_design.stderr and "Traceback" not in no_design.stderr

@@ -14,10 +14,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from conftest import CASES
-from geoback.case import LoadedCase, case_from_data, stage_names
+from geoback.case.loading import LoadedCase, case_from_data, stage_names
 from geoback.errors import CaseError
-from geoback.instruments import case_blocks
-from geoback.readings import case_readings
+from geoback.observation.instruments import case_blocks
+from geoback.observation.readings import case_readings
 
 PAPER = yaml.safe_load((CASES / "tunnel-paper.yaml").read_text())
 ROWS = [(ins["name"], k + 1, v) for ins in PAPER["instruments"] for k, v in enumerate(ins["readings"])]

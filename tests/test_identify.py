@@ -6,10 +6,10 @@ import sys
 import numpy as np
 import pytest
 
-from geoback.case import LoadedCase, case_from_data, load_case
-from geoback.estimate import fit
-from geoback.identification import identify, prepare
-from geoback.run import run_case
+from geoback.case.loading import LoadedCase, case_from_data, load_case
+from geoback.inference.estimate import fit
+from geoback.inference.identification import identify, prepare
+from geoback.commands.run import run_case
 
 
 @pytest.fixture(scope="module")
@@ -67,8 +67,8 @@ def test_covariance_is_inverse_fisher_and_scales_with_sigma(paper_problem):
     C = res.data.covariance
     direct = np.linalg.inv(A.T @ np.linalg.solve(C, A))
     assert np.allclose(res.reliability.covariance, direct, rtol=1e-8)
-    from geoback.misfit import Data, Misfit
-    from geoback.reliability import assess
+    from geoback.inference.misfit import Data, Misfit
+    from geoback.inference.reliability import assess
 
     mis = paper_problem.misfit  # the same readings with every sigma doubled: C_x -> 4 C_x
     data4 = Data(mis.data.blocks, mis.data.measured, 4 * mis.data.covariance, mis.data.labels)
@@ -121,7 +121,7 @@ def test_undetermined_combination_is_named(paper_case_path):
 
 
 def test_cli_run_prints_report_and_exits_zero(paper_case_path, tmp_path):
-    out = subprocess.run([sys.executable, "-m", "geoback.cli", "run", str(paper_case_path), "--out", str(tmp_path)],
+    out = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "run", str(paper_case_path), "--out", str(tmp_path)],
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert "E[clay]" in out.stdout and "converged" in out.stdout
@@ -131,7 +131,7 @@ def test_cli_run_prints_report_and_exits_zero(paper_case_path, tmp_path):
 def test_library_entry_points(paper_case_path):
     """DESIGN.md: `from geoback import load_case, identify, diagnose` is the library's front door."""
     import geoback.diagnosis  # noqa: F401 - importing the modules must not shadow the functions
-    import geoback.identification  # noqa: F401
+    import geoback.inference.identification  # noqa: F401
     from geoback import diagnose, identify
 
     res = identify(load_case(paper_case_path))
@@ -143,7 +143,7 @@ def test_chi2_survival_function_matches_scipy():
     """reliability.chi2_sf (written to keep scipy.special out of start-up) against gammaincc."""
     from scipy import special
 
-    from geoback.reliability import chi2_sf
+    from geoback.inference.reliability import chi2_sf
 
     for dof in (1, 2, 3, 7, 51, 400, 5000):
         for x in np.concatenate([np.linspace(1e-3, 3 * dof + 60, 120), [1e-9, 1e6]]):
@@ -151,7 +151,7 @@ def test_chi2_survival_function_matches_scipy():
             got = chi2_sf(x, dof)
             assert abs(got - expected) <= 1e-9 * expected + 1e-300, (dof, x, got, expected)
     assert np.isnan(chi2_sf(3.0, 0)) and chi2_sf(0.0, 4) == 1.0
-    from geoback import chi2
+    from geoback.inference import chi2
 
     for dof in (0.7, 2, 3.3, 51, 5000):
         for q in (1e-6, 0.025, 0.5, 0.975, 0.999999):

@@ -12,7 +12,7 @@ import yaml
 from typer.testing import CliRunner
 
 from conftest import CASES
-from geoback.cli import app
+from geoback.commands.cli import app
 
 PAPER = yaml.safe_load((CASES / "tunnel-paper.yaml").read_text())
 
@@ -128,8 +128,8 @@ def test_log_parameter_interval_is_made_in_log_space(tmp_path):
     E = summary["parameters"]["E[clay]"]
     lo, hi = E["ci95"]
     assert 0 < lo < E["estimate"] < hi
-    from geoback.case import load_case
-    from geoback.identification import identify
+    from geoback.case.loading import load_case
+    from geoback.inference.identification import identify
 
     res = identify(load_case(tmp_path / "case.yaml"), profile="none")
     lin_lo, lin_hi = res.reliability.interval95()

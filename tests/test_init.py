@@ -10,11 +10,11 @@ from pathlib import Path
 import pytest
 import yaml
 
-from geoback.case import case_schema
+from geoback.case.loading import case_schema
 from geoback.errors import GeobackError
-from geoback.template import TEMPLATE, write_template
+from geoback.commands.template import TEMPLATE, write_template
 
-GEOBACK = [sys.executable, "-m", "geoback.cli"]
+GEOBACK = [sys.executable, "-m", "geoback.commands.cli"]
 
 
 @pytest.fixture()

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from conftest import CASES
-from geoback.case import Parameter, load_case
+from geoback.case.loading import Parameter, load_case
 from geoback.errors import GeobackError
-from geoback.identification import prepare
-from geoback.simulate import synthetic_readings
+from geoback.inference.identification import prepare
+from geoback.inference.synthetic import synthetic_readings
 
 NULL = CASES / "concealed" / "null-1.yaml"
 
@@ -81,7 +81,7 @@ def test_study_data_with_instrument_errors_and_units():
 
 def test_an_instrument_error_can_be_identified():
     """bias[I1] identified with E and K0 from readings that carry it."""
-    from geoback.identification import identify
+    from geoback.inference.identification import identify
 
     loaded = load_case(NULL)
     an = prepare(loaded, parameters=[Parameter(name="E", initial=8000.0), Parameter(name="K0", initial=0.8),

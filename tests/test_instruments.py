@@ -8,9 +8,9 @@ import numpy as np
 import yaml
 
 from conftest import CASES
-from geoback import covariance as cov
-from geoback.case import LoadedCase, case_from_data
-from geoback.identification import prepare
+from geoback.case import covariance as cov
+from geoback.case.loading import LoadedCase, case_from_data
+from geoback.inference.identification import prepare
 
 
 def _paper():
@@ -92,7 +92,7 @@ def test_linewise_and_chord_operators_match_the_field():
 
 
 def test_covariance_cli_exact_values():
-    out = subprocess.run([sys.executable, "-m", "geoback.cli", "covariance", "--instrument", "inclinometer",
+    out = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "covariance", "--instrument", "inclinometer",
                           "--stations", "5", "--lengths", "0.5,1,0.5,2,1", "--sigma", "1", "--var-b", "0.3",
                           "--format", "csv"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
@@ -103,7 +103,7 @@ def test_covariance_cli_exact_values():
 
 
 def test_covariance_cli_from_case_and_errors():
-    out = subprocess.run([sys.executable, "-m", "geoback.cli", "covariance", str(CASES / "tunnel-paper.yaml"),
+    out = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "covariance", str(CASES / "tunnel-paper.yaml"),
                           "--name", "X1", "--format", "json"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     import json
@@ -111,6 +111,6 @@ def test_covariance_cli_from_case_and_errors():
     data = json.loads(out.stdout)
     C = np.array(data["matrix"])
     assert np.allclose(C, cov.sliding_micrometer_covariance(5, 0.0005, 1e-6), rtol=1e-14)
-    bad = subprocess.run([sys.executable, "-m", "geoback.cli", "covariance", "--instrument", "theodolite",
+    bad = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "covariance", "--instrument", "theodolite",
                           "--stations", "3", "--spacing", "1", "--sigma", "1"], capture_output=True, text=True)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "theodolite" in bad.stderr

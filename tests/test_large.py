@@ -12,8 +12,8 @@ from conftest import CASES
 
 @pytest.mark.slow
 def test_one_factorisation_for_a_whole_identification_at_a_million_dofs(tmp_path):
-    from geoback.case import load_case
-    from geoback.identification import identify, prepare
+    from geoback.case.loading import load_case
+    from geoback.inference.identification import identify, prepare
 
     data = yaml.safe_load((CASES / "tunnel-paper.yaml").read_text())
     data["mesh"]["size_tunnel"], data["mesh"]["size_far"] = 0.05, 0.105  # ~1.0 M DOFs

@@ -1,4 +1,4 @@
-"""Discretisation error of the readings (geoback.mesh_error): one run at the estimate on a mesh twice
+"""Discretisation error of the readings (geoback.inference.mesh_error): one run at the estimate on a mesh twice
 as fine, compared with each reading's sigma; a warning above 0.3 sigma, or the error added to C_x."""
 import copy
 
@@ -7,9 +7,9 @@ import pytest
 import yaml
 
 from conftest import CASES
-from geoback.case import LoadedCase, case_from_data, load_case
-from geoback.identification import identify, prepare
-from geoback.simulate import refined_case
+from geoback.case.loading import LoadedCase, case_from_data, load_case
+from geoback.inference.identification import identify, prepare
+from geoback.case.meshsize import refined_case
 
 PAPER = yaml.safe_load((CASES / "tunnel-paper.yaml").read_text())
 
@@ -56,7 +56,7 @@ def test_coarse_mesh_is_flagged_and_including_the_error_widens_the_intervals(tmp
 
 
 def test_too_large_a_check_is_skipped_and_said(tmp_path, monkeypatch):
-    import geoback.mesh_error as me
+    import geoback.inference.mesh_error as me
 
     monkeypatch.setattr(me, "MAX_FINE_DOFS", 1000)
     res = identify(load_case(CASES / "tunnel-paper.yaml"), mesh_error="check")

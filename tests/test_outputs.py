@@ -13,16 +13,16 @@ from pathlib import Path
 import pytest
 import yaml
 
-import geoback.resultsets
-from geoback.case import load_case
-from geoback.explore import explore
-from geoback.identification import identify, prepare
-from geoback.report import write_run
-from geoback.run import run_case
+import geoback.reports.resultsets
+from geoback.case.loading import load_case
+from geoback.inference.explore import explore
+from geoback.inference.identification import identify, prepare
+from geoback.reports.report import write_run
+from geoback.commands.run import run_case
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "cases" / "tunnel-paper.yaml"
-GEOBACK = [sys.executable, "-m", "geoback.cli"]
+GEOBACK = [sys.executable, "-m", "geoback.commands.cli"]
 
 TABLES = ["parameters.csv", "covariance.csv", "correlation.csv", "eigen.csv", "information_density.csv",
           "readings.csv", "iterations.csv"]
@@ -124,7 +124,7 @@ def test_interrupted_run_leaves_old_or_new_set(tmp_path, cache, monkeypatch):
     for name in names:
         assert not _same(old / name, new / name), f"{name}: old and new runs must differ for this test"
 
-    real = {"replace": os.replace, "link": os.link, "rename": os.rename, "swap": geoback.resultsets._swap}
+    real = {"replace": os.replace, "link": os.link, "rename": os.rename, "swap": geoback.reports.resultsets._swap}
     state = {"left": -1, "steps": 0, "swapped": False}
 
     def step():
@@ -142,8 +142,8 @@ def test_interrupted_run_leaves_old_or_new_set(tmp_path, cache, monkeypatch):
         return wrapper
 
     for name in ("replace", "link", "rename"):
-        monkeypatch.setattr(geoback.resultsets.os, name, failing(name))
-    monkeypatch.setattr(geoback.resultsets, "_swap", failing("swap"))
+        monkeypatch.setattr(geoback.reports.resultsets.os, name, failing(name))
+    monkeypatch.setattr(geoback.reports.resultsets, "_swap", failing("swap"))
     out = tmp_path / "probe"
     shutil.copytree(old, out)
     write_run(result, out, exploration)  # count the steps of a whole write
@@ -168,7 +168,7 @@ def test_interrupted_run_leaves_old_or_new_set(tmp_path, cache, monkeypatch):
                 f"after {n} of {total} steps: {name} is not the {'new' if swapped else 'old'} version"
         leftovers = [p.name for p in tmp_path.iterdir() if p.name.startswith(f".run{n}")]
         assert not leftovers, f"after {n} steps: left behind {leftovers}"
-        assert geoback.resultsets.check_result_set(out, "run") == [] or not swapped
+        assert geoback.reports.resultsets.check_result_set(out, "run") == [] or not swapped
     monkeypatch.undo()
 
 

@@ -1,4 +1,4 @@
-"""PlasticSimulation (geoback.plastic): a case with Mohr-Coulomb ground behind the Simulation interface,
+"""PlasticSimulation (geoback.physics.plastic): a case with Mohr-Coulomb ground behind the Simulation interface,
 on a real gmsh mesh with the real incremental solver (no mocks).
 
 The case: a tunnel (R = 3 m, axis 15 m deep) in one mohr-coulomb layer under gravity, K0 = 0.9,
@@ -20,14 +20,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from geoback.case import LoadedCase, case_from_data
+from geoback.case.loading import LoadedCase, case_from_data
 from geoback.errors import CaseError, ForwardFailure
-from geoback.estimate import Settings, fit
-from geoback.identification import prepare
-from geoback.instruments import build_survey
-from geoback.plastic import PlasticSimulation
-from geoback.plasticity import Options
-from geoback.simulation import make_simulation
+from geoback.inference.estimate import Settings, fit
+from geoback.inference.identification import prepare
+from geoback.observation.instruments import build_survey
+from geoback.physics.plastic import PlasticSimulation
+from geoback.physics.plasticity import Options
+from geoback.physics.factory import make_simulation
 
 
 def case_data(**layer) -> dict:
@@ -184,11 +184,11 @@ def test_a_trial_point_without_solution_is_a_rejected_step():
     loaded = loaded_case(psi=20.0, phi=24.0)
     analysis = prepare(loaded, with_readings=False)
     x = analysis.simulation.predict(analysis.values).x
-    from geoback.case import Parameter
+    from geoback.case.loading import Parameter
 
     a = prepare(loaded, with_readings=False, simulation=analysis.simulation,
                 parameters=[Parameter(name="phi", initial=40.0, bounds=(10.0, 45.0))])
-    from geoback.misfit import Data, Misfit
+    from geoback.inference.misfit import Data, Misfit
 
     misfit = Misfit(a.simulation, Data.build(a.simulation.survey.blocks, x), a.parameters, a.base_values)
     res = fit(misfit, Settings(max_iterations=30), method="gn")
@@ -201,7 +201,7 @@ def test_forecasts_on_yielding_ground_are_the_model_at_the_estimate():
     at the first): the forecasts read through another survey (Simulation.surveying) equal the forward
     model at the identified values at those points, their sensitivities equal central differences of it,
     and the simulation reads its own instruments as before."""
-    from geoback.forecast import forecast
+    from geoback.worth.forecast import forecast
 
     data = case_data()
     data["parameters"] = [dict(name="E", initial="30 MPa", bounds=["1 MPa", "1 GPa"]),
@@ -220,7 +220,7 @@ def test_forecasts_on_yielding_ground_are_the_model_at_the_estimate():
     truth = dict(analysis.values, **{"E[marl]": 40000.0, "c[marl]": 50.0})
     x_true = sim.predict(truth).x
     a = analysis.with_readings(x_true)
-    from geoback.identification import identify
+    from geoback.inference.identification import identify
 
     res = identify(a, profile="none")
     assert res.status == "converged" and res.fit.p == pytest.approx([40000.0, 50.0], rel=1e-4)
@@ -238,14 +238,14 @@ def test_forecasts_on_yielding_ground_are_the_model_at_the_estimate():
     np.testing.assert_allclose(fc.value[fc.rows("trough")], expected_trough, rtol=1e-9, atol=1e-12)
     expected_p = fresh.stage_displacements_at(values, np.array([[4.0, -10.0]]), "final")[0]
     np.testing.assert_allclose(fc.value[fc.rows("P")], expected_p, rtol=1e-9, atol=1e-12)
-    from geoback.instruments import case_blocks
+    from geoback.observation.instruments import case_blocks
 
     x1_near = make_simulation(loaded, mesh=sim.mesh, blocks=[b.at("near") for b in case_blocks(loaded)
                                                              if b.name == "X1"]).predict(values).x
     np.testing.assert_allclose(fc.value[fc.rows("X1-near")], x1_near, rtol=1e-9, atol=1e-12)
 
     # geoback design on yielding ground: candidates read through another survey, no new run
-    from geoback.design import design
+    from geoback.worth.design import design
 
     d = design(a, res)
     assert d.counts["forward_runs"] == 0 and len(d.names) == 2

@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from conftest import CASES
-from geoback.case import load_case
-from geoback.identification import prepare
-from geoback.run import run_case
-from geoback.scale_estimates import chi2_ppf
-from geoback.simulate import simulate
+from geoback.case.loading import load_case
+from geoback.inference.identification import prepare
+from geoback.commands.run import run_case
+from geoback.inference.scale_estimates import chi2_ppf
+from geoback.commands.simulate import simulate
 
 PLASTIC = CASES / "plastic-tunnel.yaml"
 TRUTH = {"E[marl]": 40000.0, "K0": 0.9, "c[marl]": 50.0, "phi[marl]": 30.0}  # cases/generate_plastic_tunnel.py

@@ -1,4 +1,4 @@
-"""The closed-form deep tunnel in Mohr-Coulomb ground (geoback.plasticity.closed_form).
+"""The closed-form deep tunnel in Mohr-Coulomb ground (geoback.physics.plasticity.closed_form).
 
 Known limits and the conditions the solution is built from, checked on the formulae:
 * c -> infinity, or a support pressure above the critical one: elastic, u_R = (p0 - p_i) R (1+nu)/E;
@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geoback.plasticity.closed_form import DeepTunnelMC
+from geoback.physics.plasticity.closed_form import DeepTunnelMC
 
 P0, R, E, NU, C, PHI = 1000.0, 1.0, 1.0e5, 0.4, 110.0, np.radians(30.0)
 

@@ -1,4 +1,4 @@
-"""Single-point verification of the Mohr-Coulomb return mapping (geoback.plasticity.mohr_coulomb).
+"""Single-point verification of the Mohr-Coulomb return mapping (geoback.physics.plasticity.mohr_coulomb).
 
 * elastic states are left alone, with the elastic tangent;
 * after a return the stress satisfies the yield conditions, and the plastic strain is a
@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize, nnls
 
-from geoback.plasticity import mohr_coulomb as mc
-from geoback.plasticity.mohr_coulomb import Material
+from geoback.physics.plasticity import mohr_coulomb as mc
+from geoback.physics.plasticity.mohr_coulomb import Material
 
 E, NU, C, PHI = 1.0e4, 0.3, 20.0, np.radians(30.0)
 

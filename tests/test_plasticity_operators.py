@@ -1,17 +1,17 @@
-"""Quadrature-point operators (geoback.plasticity.operators) and the unsymmetric factorisation
-(geoback.plasticity.linear) against the elastic FE model they adapt."""
+"""Quadrature-point operators (geoback.physics.plasticity.operators) and the unsymmetric factorisation
+(geoback.physics.plasticity.linear) against the elastic FE model they adapt."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from geoback.ground import plane_strain_isotropic
-from geoback.plasticity import mohr_coulomb as mc
-from geoback.plasticity.deep_tunnel import deep_tunnel_model
-from geoback.plasticity.linear import LU, Counters, SingularMatrix
-from geoback.plasticity.operators import PointOperators
-from geoback.solver import available_backends
+from geoback.physics.ground import plane_strain_isotropic
+from geoback.physics.plasticity import mohr_coulomb as mc
+from geoback.physics.plasticity.deep_tunnel import deep_tunnel_model
+from geoback.physics.plasticity.linear import LU, Counters, SingularMatrix
+from geoback.physics.plasticity.operators import PointOperators
+from geoback.physics.solver import available_backends
 
 
 @pytest.fixture(scope="module")

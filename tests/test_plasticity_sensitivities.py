@@ -17,9 +17,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geoback.plasticity import Material, Options, ParameterDerivative, solve
-from geoback.plasticity.deep_tunnel import deep_tunnel_model
-from geoback.plasticity.operators import PointOperators
+from geoback.physics.plasticity import Material, Options, ParameterDerivative, solve
+from geoback.physics.plasticity.deep_tunnel import deep_tunnel_model
+from geoback.physics.plasticity.operators import PointOperators
 
 P0 = 1000.0
 BASE = dict(E=1.0e5, nu=0.4, c=110.0, phi=np.radians(30.0), psi=np.radians(10.0), K0=0.9, beta=0.95)

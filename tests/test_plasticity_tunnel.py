@@ -1,4 +1,4 @@
-"""The incremental elastoplastic solution (geoback.plasticity.incremental) on real gmsh meshes.
+"""The incremental elastoplastic solution (geoback.physics.plasticity.incremental) on real gmsh meshes.
 
 * deep circular tunnel under hydrostatic stress against the closed form (Salencon 1969;
   Carranza-Torres & Fairhurst 2000): plastic radius and wall displacement within 2 %, associated
@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geoback.ground import plane_strain_isotropic
-from geoback.plasticity import DeepTunnelMC, Material, NonConvergence, Options, solve
-from geoback.plasticity.deep_tunnel import deep_tunnel_model, hydrostatic_load, measure
-from geoback.plasticity.operators import PointOperators
-from geoback.solver import Factorisation
+from geoback.physics.ground import plane_strain_isotropic
+from geoback.physics.plasticity import DeepTunnelMC, Material, NonConvergence, Options, solve
+from geoback.physics.plasticity.deep_tunnel import deep_tunnel_model, hydrostatic_load, measure
+from geoback.physics.plasticity.operators import PointOperators
+from geoback.physics.solver import Factorisation
 
 P0, E, NU, C, PHI = 1000.0, 1.0e5, 0.4, 110.0, 30.0  # R_p = 1.768 R at full release
 

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from geoback import plots
-from geoback.case import load_case
-from geoback.explore import explore
-from geoback.identification import identify, prepare
-from geoback.plots.common import nice_factor
+from geoback.reports import plots
+from geoback.case.loading import load_case
+from geoback.inference.explore import explore
+from geoback.inference.identification import identify, prepare
+from geoback.reports.plots.common import nice_factor
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER_CASE = ROOT / "cases" / "tunnel-paper.yaml"
@@ -148,7 +148,7 @@ def test_cli_run_with_plots_writes_the_figures(cache_dir, tmp_path):
     out = tmp_path / "out"
     env = dict(os.environ, GEOBACK_CACHE=str(cache_dir))
     exe = Path(sys.executable).with_name("geoback")
-    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "geoback.cli"]
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "geoback.commands.cli"]
     proc = subprocess.run(cmd + ["run", str(PAPER_CASE), "--out", str(out), "--plots", "-q"],
                           capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 0, proc.stderr

@@ -1,5 +1,5 @@
 """Readings matched by instrument and station, depth or distance, in any row order and in the
-formats instrument software and spreadsheets export (geoback.readings); every mistake refused with
+formats instrument software and spreadsheets export (geoback.observation.readings); every mistake refused with
 the file, line and station."""
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from conftest import CASES
-from geoback.case import load_case
+from geoback.case.loading import load_case
 from geoback.errors import CaseError
-from geoback.identification import identify, prepare
+from geoback.inference.identification import identify, prepare
 
 PAPER = CASES / "tunnel-paper.yaml"
 
@@ -184,7 +184,7 @@ def test_readings_out_reads_back_identically(tmp_path):
     case = tmp_path / "paper.yaml"
     shutil.copy(PAPER, case)
     out = tmp_path / "r.csv"
-    run = subprocess.run([sys.executable, "-m", "geoback.cli", "simulate", str(case), "--noise", "--seed", "3",
+    run = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "simulate", str(case), "--noise", "--seed", "3",
                           "--readings-out", str(out)], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     lines = out.read_text().splitlines()

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 import yaml
 
-import geoback.mesh
-from geoback.case import case_from_data
-from geoback.mesh import build_mesh, mesh_inputs, mesh_key
+import geoback.physics.mesh
+from geoback.case.loading import case_from_data
+from geoback.case.meshsize import mesh_inputs
+from geoback.physics.mesh import build_mesh, mesh_key
 from measure import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,7 +36,7 @@ def coarse_case():
 
 
 def entry_path(case) -> Path:
-    return geoback.mesh.cache_dir() / "meshes" / f"{mesh_key(mesh_inputs(case))}.npz"
+    return geoback.physics.mesh.cache_dir() / "meshes" / f"{mesh_key(mesh_inputs(case))}.npz"
 
 
 def _arrays(path: Path) -> dict:
@@ -47,7 +48,7 @@ def _resave(path: Path, arrays: dict, keep_checksum: bool = False) -> None:
     """Write arrays back, with a checksum recomputed for them (an entry consistent as a file,
     inconsistent as a mesh) unless keep_checksum."""
     if not keep_checksum:
-        arrays = dict(arrays, checksum=np.array(geoback.mesh._checksum(arrays)))
+        arrays = dict(arrays, checksum=np.array(geoback.physics.mesh._checksum(arrays)))
     with open(path, "wb") as fh:
         np.savez(fh, **arrays)
 
@@ -128,9 +129,9 @@ def test_damaged_entry_is_rebuilt_with_a_notice(how, cache, capsys):
     assert path.is_file()
     capsys.readouterr()
     _damage(path, how)
-    calls = geoback.mesh.GMSH_CALLS
+    calls = geoback.physics.mesh.GMSH_CALLS
     mesh = build_mesh(case)
-    assert geoback.mesh.GMSH_CALLS == calls + 1, "the damaged entry was used"
+    assert geoback.physics.mesh.GMSH_CALLS == calls + 1, "the damaged entry was used"
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if line.strip()]
     if how == "directory":  # cannot be replaced: rebuilt, and the cache write skipped, each said once
@@ -142,7 +143,7 @@ def test_damaged_entry_is_rebuilt_with_a_notice(how, cache, capsys):
         assert np.array_equal(getattr(mesh, name), getattr(fresh, name)), name
     if how != "directory":  # the entry was rewritten and is used from now on, silently
         build_mesh(case)
-        assert geoback.mesh.GMSH_CALLS == calls + 1
+        assert geoback.physics.mesh.GMSH_CALLS == calls + 1
         assert capsys.readouterr().err == ""
 
 
@@ -164,7 +165,7 @@ def test_stale_temporary_files_are_removed(cache, monkeypatch):
     fresh = folder / ".def.456.tmp.npz"
     stale.write_bytes(b"half")
     fresh.write_bytes(b"being written")
-    old = os.path.getmtime(stale) - 2 * geoback.mesh._STALE_TMP_SECONDS
+    old = os.path.getmtime(stale) - 2 * geoback.physics.mesh._STALE_TMP_SECONDS
     os.utime(stale, (old, old))
     other = copy.deepcopy(yaml.safe_load(PAPER.read_text()))
     other["mesh"] = {"size_tunnel": 0.7, "size_far": 6.0}

@@ -12,12 +12,13 @@ from pathlib import Path
 import pytest
 import yaml
 
-import geoback.mesh
-from geoback import meshsize
-from geoback.case import case_from_data, load_case
+import geoback.physics.mesh
+from geoback.case import meshsize
+from geoback.case.loading import case_from_data, load_case
 from geoback.errors import CaseError, GeobackError
-from geoback.mesh import _run_gmsh, build_mesh, mesh_inputs
-from geoback.validation import VALIDATE_MESH_DOFS
+from geoback.case.meshsize import mesh_inputs
+from geoback.physics.mesh import _run_gmsh, build_mesh
+from geoback.commands.validation import VALIDATE_MESH_DOFS
 from measure import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,7 +66,7 @@ def test_refusal_states_dofs_and_memory_before_gmsh(tmp_path, monkeypatch):
     """The issue's case: ~1 M elements, accepted silently before. Now refused at load, located at
     the mesh setting responsible, with DOFs and memory, without running gmsh."""
     path = _case(tmp_path, "big.yaml", size_tunnel=0.01, size_far=0.05)
-    calls = geoback.mesh.GMSH_CALLS
+    calls = geoback.physics.mesh.GMSH_CALLS
     with pytest.raises(CaseError) as info:
         load_case(path)
     message = str(info.value)
@@ -73,12 +74,12 @@ def test_refusal_states_dofs_and_memory_before_gmsh(tmp_path, monkeypatch):
                     r"500,000 DOFs \(~1\.8 GB to run\), found sizes giving about [\d.]+ M DOFs, ~\d+ GB "
                     r"\(about [\d.,]+ (M )?elements, mostly from size_far 0\.05\); coarsen the mesh "
                     r"\(larger mesh sizes\) or pass --allow-large$", message), message
-    assert geoback.mesh.GMSH_CALLS == calls
+    assert geoback.physics.mesh.GMSH_CALLS == calls
     loaded = load_case(path, allow_large=True)  # lifted; nothing meshed yet
-    assert loaded.allow_large and geoback.mesh.GMSH_CALLS == calls
+    assert loaded.allow_large and geoback.physics.mesh.GMSH_CALLS == calls
     with pytest.raises(GeobackError, match="pass --allow-large"):
         build_mesh(loaded.case)  # the library's own guard, for cases made in code
-    assert geoback.mesh.GMSH_CALLS == calls
+    assert geoback.physics.mesh.GMSH_CALLS == calls
 
 
 def test_hard_limit_even_with_allow_large(tmp_path):

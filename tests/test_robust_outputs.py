@@ -23,10 +23,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-import geoback.resultsets as outputs
+import geoback.reports.resultsets as outputs
 from geoback.outputs import write_atomic
-from geoback.case import load_case
-from geoback.resultsets import ResultFolderError, check_result_set, result_set
+from geoback.case.loading import load_case
+from geoback.reports.resultsets import ResultFolderError, check_result_set, result_set
 from measure import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -293,7 +293,7 @@ def previous_result(tmp_path_factory):
     old = tmp / "old"
     case = _old_variant(tmp)
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "geoback.cli", "run", str(case), "--plots", "-q", "--out", str(old)],
+    proc = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "run", str(case), "--plots", "-q", "--out", str(old)],
                           capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode in (0, 1), proc.stderr
     names = sorted(p.name for p in old.iterdir() if not p.name.startswith("."))
@@ -306,7 +306,7 @@ def _interrupt(tmp: Path, env: dict, old: Path, k: int, after: float, sig: int):
     if target.exists():
         shutil.rmtree(target)
     shutil.copytree(old, target)
-    proc = subprocess.Popen([sys.executable, "-m", "geoback.cli", "run", str(PAPER), "--plots", "-q",
+    proc = subprocess.Popen([sys.executable, "-m", "geoback.commands.cli", "run", str(PAPER), "--plots", "-q",
                              "--out", str(target)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         proc.wait(timeout=after)
@@ -330,7 +330,7 @@ def _kill_trials(previous_result, moments: list[float], sig=signal.SIGKILL) -> d
             else:
                 assert "are complete" in err, err
     # the next run over a folder a killed run left behind succeeds, and clears what it left
-    proc = subprocess.run([sys.executable, "-m", "geoback.cli", "run", str(PAPER), "--plots", "-q", "--out",
+    proc = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "run", str(PAPER), "--plots", "-q", "--out",
                            str(target)], capture_output=True, text=True, env=env, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert consistent(target, old, names) == "new"

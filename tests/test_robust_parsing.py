@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from geoback import yamlmarks
-from geoback.case import load_case
+from geoback.case import yamlmarks
+from geoback.case.loading import load_case
 from geoback.errors import CaseError
-from geoback.yamlmarks import parse_yaml_with_marks
+from geoback.case.yamlmarks import parse_yaml_with_marks
 from measure import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]

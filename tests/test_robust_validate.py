@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from geoback.case import case_from_data
+from geoback.case.loading import case_from_data
 from geoback.errors import CaseError
 from measure import run_cli
 

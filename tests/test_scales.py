@@ -15,11 +15,11 @@ import pytest
 import yaml
 from scipy import special, stats
 
-from geoback import scale_estimates as se
-from geoback import scales as sc
-from geoback.case import LoadedCase, case_from_data, load_case
+from geoback.inference import scale_estimates as se
+from geoback.inference import scales as sc
+from geoback.case.loading import LoadedCase, case_from_data, load_case
 from geoback.errors import CaseError, GeobackError
-from geoback.identification import identify, prepare
+from geoback.inference.identification import identify, prepare
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "cases" / "tunnel-paper.yaml"
@@ -146,7 +146,7 @@ def _paper_dict() -> dict:
 def _noisy_paper(seed: int, scales=None, factors=(1.0, 1.0)) -> dict:
     """The paper case with readings from a 2x finer mesh plus noise from each stated C_x (times
     `factors` for I1, X1) and the given error_scales."""
-    from geoback.simulate import synthetic_readings
+    from geoback.inference.synthetic import synthetic_readings
 
     data = _paper_dict()
     loaded = LoadedCase(case_from_data(data), PAPER, {})
@@ -270,7 +270,7 @@ def test_scale_three_times_stated_is_found_and_reported(scaled_analysis, tmp_pat
     """X1's noise is twice the stated: its scale says so in words, numbers and files."""
     import json
 
-    from geoback.report import write_run
+    from geoback.reports.report import write_run
 
     res = identify(scaled_analysis)
     x1 = next(e for e in res.reliability.error_scales if e.name == "X1")
@@ -358,7 +358,7 @@ def test_one_reading_cannot_carry_a_free_scale(tmp_path):
 
 
 def test_schema_documents_error_scales():
-    from geoback.case import case_schema
+    from geoback.case.loading import case_schema
 
     schema = case_schema()
     assert "error_scales" in schema["properties"]
@@ -375,7 +375,7 @@ def _concealed_with_scales(tmp_path, name: str, scales, readings: dict | None = 
     """A concealed case with error_scales (and optionally other readings), written next to its CSV."""
     import shutil
 
-    from geoback.simulate import write_readings_csv
+    from geoback.commands.simulate import write_readings_csv
 
     data = yaml.safe_load((CONCEALED / f"{name}.yaml").read_text())
     data["error_scales"] = scales
@@ -393,7 +393,7 @@ def test_diagnose_free_scale_does_not_hide_missing_physics(tmp_path):
     (a located mismatch, not an explanation), the hypothesis scored with the scale held at its
     null estimate is still significant, the refit finds B[I1] and I1's scale returns to ~1."""
     from geoback.diagnosis import diagnose
-    from geoback.diagnosis.report import diagnosis_json, diagnosis_text
+    from geoback.reports.diagnosis_report import diagnosis_json, diagnosis_text
 
     d = diagnose(load_case(_concealed_with_scales(tmp_path, "toe-moved", [{"instruments": ["I1"]}])))
     first = d.rounds[0]
@@ -416,10 +416,10 @@ def test_diagnose_free_scale_does_not_hide_missing_physics(tmp_path):
 def test_diagnose_sloppy_instrument_is_a_located_mismatch_not_adequate(tmp_path):
     """No physics missing, but I1 was read 3x less accurately than stated and its scale is free:
     diagnose does not call that adequate, names I1 and accepts no hypothesis."""
-    from geoback.case import LoadedCase
+    from geoback.case.loading import LoadedCase
     from geoback.diagnosis import diagnose
-    from geoback.diagnosis.report import verdict
-    from geoback.simulate import synthetic_readings
+    from geoback.reports.diagnosis_report import verdict
+    from geoback.inference.synthetic import synthetic_readings
 
     data = yaml.safe_load((CONCEALED / "null-1.yaml").read_text())
     truth = LoadedCase(case_from_data(data), CONCEALED / "null-1.yaml", {})

@@ -1,14 +1,14 @@
-"""The seam (geoback.misfit): its objective and Jacobian equal the paper's J written out directly
+"""The seam (geoback.inference.misfit): its objective and Jacobian equal the paper's J written out directly
 (eqns 6, 9 and 53 as corrected), priors enter as observations, and nothing downstream re-runs the model."""
 import numpy as np
 import pytest
 import yaml
 
 from conftest import CASES
-from geoback.case import LoadedCase, case_from_data, load_case
-from geoback.explore import explore
-from geoback.identification import identify, prepare
-from geoback.report import write_run
+from geoback.case.loading import LoadedCase, case_from_data, load_case
+from geoback.inference.explore import explore
+from geoback.inference.identification import identify, prepare
+from geoback.reports.report import write_run
 
 
 @pytest.fixture(scope="module")
@@ -77,7 +77,7 @@ def test_measured_readings_cannot_be_changed_in_place(paper):
 
 def test_reports_and_figures_run_no_model(tmp_path):
     """Only the exploration step solves; writing every output (figures included) reads results."""
-    from geoback import plots
+    from geoback.reports import plots
 
     paper = prepare(load_case(CASES / "tunnel-paper.yaml"))  # a fresh simulation: counts from zero
     res = identify(paper)

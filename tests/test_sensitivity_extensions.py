@@ -5,9 +5,9 @@ import pytest
 import yaml
 
 from conftest import CASES, central_difference_error
-from geoback.case import LoadedCase, case_from_data
-from geoback.ground import plane_strain_cross_anisotropic, plane_strain_isotropic
-from geoback.identification import prepare
+from geoback.case.loading import LoadedCase, case_from_data
+from geoback.physics.ground import plane_strain_cross_anisotropic, plane_strain_isotropic
+from geoback.inference.identification import prepare
 
 
 @pytest.fixture(scope="module")

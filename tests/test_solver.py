@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from geoback.solver import MAX_BASIS, Factorisation, available_backends
+from geoback.physics.solver import MAX_BASIS, Factorisation, available_backends
 
 
 def _spd(n=400, seed=0):

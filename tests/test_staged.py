@@ -1,4 +1,4 @@
-"""Staged construction with a lining (geoback.staged, geoback.lining, geoback.construction).
+"""Staged construction with a lining (geoback.physics.staged, geoback.physics.lining, geoback.case.construction).
 
 - Convergence-confinement of a deep circular tunnel (uniform in-situ stress, elastic ground, a thick
   elastic ring installed after a release beta): wall displacement and lining thrust within 1 % of the
@@ -22,14 +22,14 @@ import scipy.sparse.linalg as spla
 import yaml
 
 from conftest import CASES
-from geoback.case import LoadedCase, case_from_data
-from geoback.diagnosis.extensions import EXTENSIONS
-from geoback.elastic import ElasticSimulation
-from geoback.ground import Extension
-from geoback.identification import identify, prepare
-from geoback.readings import survey_blocks
-from geoback.simulation import make_simulation
-from geoback.staged import StagedSimulation
+from geoback.case.loading import LoadedCase, case_from_data
+from geoback.physics.extensions import EXTENSIONS
+from geoback.physics.elastic import ElasticSimulation
+from geoback.physics.ground import Extension
+from geoback.inference.identification import identify, prepare
+from geoback.observation.readings import survey_blocks
+from geoback.physics.factory import make_simulation
+from geoback.physics.staged import StagedSimulation
 from lined_tunnel import LinedTunnel, ccm, check_michell, support_stiffness
 
 # ---------------------------------------------------------------------------- the deep tunnel
@@ -159,7 +159,7 @@ def loaded_of(data) -> LoadedCase:
 
 def staged_analysis(data, **kw):
     loaded = loaded_of(data)
-    from geoback.case import stage_names
+    from geoback.case.loading import stage_names
 
     blocks, _ = survey_blocks(loaded, stage_names(loaded.case), read=False)
     sim = make_simulation(loaded, blocks=blocks)

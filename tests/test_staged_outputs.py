@@ -16,9 +16,9 @@ import pytest
 import yaml
 
 from conftest import CASES
-from geoback.case import LoadedCase, case_from_data, load_case
+from geoback.case.loading import LoadedCase, case_from_data, load_case
 from geoback.diagnosis import diagnose
-from geoback.run import run_case
+from geoback.commands.run import run_case
 
 STAGED = CASES / "staged-tunnel.yaml"
 TRUTH = {"E[clay]": 40000.0, "K0": 0.7, "beta[advance]": 0.35}  # cases/generate_staged_tunnel.py
@@ -101,7 +101,7 @@ def test_every_figure_of_a_staged_run(run):
 
 
 def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "geoback.cli", *map(str, args)], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "geoback.commands.cli", *map(str, args)], capture_output=True, text=True,
                           cwd=cwd, timeout=600)
 
 
@@ -129,7 +129,7 @@ def test_study_data_per_stage_is_read_back(tmp_path):
     for ins in data["instruments"]:
         ins["readings_file"] = str(target)
     loaded = LoadedCase(case_from_data(data), tmp_path / "case.yaml", {})
-    from geoback.identification import prepare
+    from geoback.inference.identification import prepare
 
     a = prepare(loaded)
     assert a.misfit.m == 44
@@ -138,7 +138,8 @@ def test_study_data_per_stage_is_read_back(tmp_path):
 def concealed(tmp_path: Path, truth: dict, parameters: list, seed: int, assumed_release: float = 0.5) -> LoadedCase:
     """The shipped case (assuming `assumed_release` before the lining) with readings simulated (finer
     mesh, noise) at other values than it assumes."""
-    from geoback.simulate import synthetic_readings, write_readings_csv
+    from geoback.commands.simulate import write_readings_csv
+    from geoback.inference.synthetic import synthetic_readings
 
     data = yaml.safe_load(STAGED.read_text())
     data["construction"]["stages"][0]["release"] = assumed_release

@@ -97,8 +97,8 @@ def test_forecast_coverage_plastic_machinery(out):
     counted, and a replicate's band is the one geoback's own forecast (draws=0) gives on that
     replicate's readings. The machinery only; the coverage needs >= 500 replicates (see the study)."""
     import forecast_coverage as study
-    from geoback.forecast import forecast
-    from geoback.identification import identify, prepare
+    from geoback.worth.forecast import forecast
+    from geoback.inference.identification import identify, prepare
 
     r = study.main(["--small", "--case", "plastic", "--out", str(out)])
     _outputs_exist(out, f"{study.NAME}_plastic")
@@ -126,8 +126,8 @@ def test_cp_equals_scipy_least_squares_covariance():
     from scipy.optimize import least_squares
 
     import common as C
-    from geoback.identification import identify, prepare
-    from geoback.simulate import synthetic_readings
+    from geoback.inference.identification import identify, prepare
+    from geoback.inference.synthetic import synthetic_readings
 
     data = C.case_dict(weighting="full")
     loaded = C.loaded_case(data)
@@ -185,7 +185,7 @@ def _two_layer_case():
 
 def test_sensitivities_match_central_differences():
     from conftest import central_difference_error
-    from geoback.identification import prepare
+    from geoback.inference.identification import prepare
 
     problem = prepare(_two_layer_case())
     names = problem.parameters.names

@@ -13,8 +13,9 @@ from pathlib import Path
 
 import yaml
 
-from geoback.case import LoadedCase, case_from_data
-from geoback.simulate import synthetic_readings, write_readings_csv
+from geoback.case.loading import LoadedCase, case_from_data
+from geoback.commands.simulate import write_readings_csv
+from geoback.inference.synthetic import synthetic_readings
 
 HERE = Path(__file__).resolve().parent
 

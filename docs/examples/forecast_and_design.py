@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from geoback import identify, load_case, prepare
-from geoback.design import design
-from geoback.forecast import forecast
+from geoback.worth.design import design
+from geoback.worth.forecast import forecast
 
 CASE = Path(__file__).resolve().parents[2] / "cases" / "staged-forecast.yaml"
 

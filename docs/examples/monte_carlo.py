@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from geoback import load_case, prepare
-from geoback.identification import identify, identify_replicates
+from geoback.inference.identification import identify, identify_replicates
 
 CASE = Path(__file__).resolve().parents[2] / "cases" / "tunnel-paper.yaml"
 N = int(sys.argv[1]) if len(sys.argv) > 1 else 200

@@ -9,10 +9,10 @@ eqn 8; its Figs. 2 and 5), and the lining and per-stage instrument figures of th
 """
 from pathlib import Path
 
-from geoback import plots
-from geoback.case import load_case
-from geoback.explore import explore
-from geoback.identification import identify, prepare
+from geoback.reports import plots
+from geoback.case.loading import load_case
+from geoback.inference.explore import explore
+from geoback.inference.identification import identify, prepare
 
 HERE = Path(__file__).resolve().parent
 CASE = HERE.parents[1] / "cases" / "tunnel-paper.yaml"
@@ -34,10 +34,10 @@ def main() -> None:
     staged = figures(prepare(load_case(STAGED)), None, ("instruments", "lining"))
     paths += plots.save_figures({"lining": staged["lining"], "instruments_staged": staged["instruments"]}, HERE,
                                 formats=("png",))
-    from geoback.design import design
-    from geoback.forecast import forecast
-    from geoback.plots.design import design_figure
-    from geoback.plots.forecast import forecast_figure
+    from geoback.worth.design import design
+    from geoback.worth.forecast import forecast
+    from geoback.reports.plots.design import design_figure
+    from geoback.reports.plots.forecast import forecast_figure
 
     analysis = prepare(load_case(FORECAST))
     res = identify(analysis)

@@ -1,21 +1,30 @@
 """geoback: maximum-likelihood back-analysis of excavations (Ledesma, Gens & Alonso 1996).
 
-    from geoback import load_case, identify, diagnose
-    loaded = load_case("cases/tunnel-paper.yaml")
-    analysis = prepare(loaded)         # mesh, FE model, instruments, readings (optional step)
-    result = identify(loaded)          # result["E[clay]"].value, .std, .interval; result.report()
-    diagnosis = diagnose(loaded)       # .accepted, .final, .baseline
+    import geoback
+    loaded = geoback.load_case("cases/tunnel-paper.yaml")
+    result = geoback.identify(loaded)          # result["E[clay]"].value, .std, .interval
+    print(geoback.fit_report(result))          # the fit report (as `geoback run` prints it)
+    diagnosis = geoback.diagnose(loaded)       # .accepted, .final, .baseline
+    analysis = geoback.prepare(loaded)         # mesh, FE model, instruments, readings (optional step)
+    fc = geoback.forecast(analysis, result)    # the case's forecasts with their bands
+    d = geoback.design(analysis, result)       # data worth of the case's candidate instruments
+
+The house is in rooms (``docs/architecture.md``): case, observation, physics, inference, worth,
+diagnosis, reports, commands; the names above are the public API and load on first use.
 """
 from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from .case import load_case  # noqa: E402
+from geoback.case.loading import load_case  # noqa: E402
 
-__all__ = ["load_case", "prepare", "identify", "explore", "run_case", "diagnose", "__version__"]
+_LAZY = {"prepare": "geoback.inference.identification", "identify": "geoback.inference.identification",
+         "explore": "geoback.inference.explore", "diagnose": "geoback.diagnosis.procedure",
+         "forecast": "geoback.worth.forecast", "design": "geoback.worth.design",
+         "fit_report": "geoback.reports.report", "run_case": "geoback.commands.run"}
+_ALIASES = {"fit_report": "report_text"}
 
-_LAZY = {"prepare": ".identification", "identify": ".identification", "explore": ".explore", "run_case": ".run",
-         "diagnose": ".diagnosis"}
+__all__ = ["load_case", *_LAZY, "__version__"]
 
 
 def __getattr__(name: str):
@@ -23,5 +32,10 @@ def __getattr__(name: str):
     if name in _LAZY:
         from importlib import import_module
 
-        return getattr(import_module(_LAZY[name], __name__), name)
+        return getattr(import_module(_LAZY[name]), _ALIASES.get(name, name))
     raise AttributeError(f"module 'geoback' has no attribute '{name}'")
+
+
+def __dir__():
+    """The public API first: what tab completion offers."""
+    return sorted(set(__all__) | {"__version__"})

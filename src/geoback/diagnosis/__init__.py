@@ -1,16 +1,13 @@
 """`geoback diagnose`: locate the mismatch, name the missing physics, model it, show the fit improve.
 
-The extension table (``extensions.py``) is read by the simulation; importing it does not load the
-rest of this package.
+Its files and words (diagnosis.md, diagnosis.json) are written by ``geoback.reports.diagnosis_report``.
 """
 from __future__ import annotations
 
-__all__ = ["KINDS", "Hypothesis", "candidate_hypotheses", "Diagnosis", "diagnose", "diagnosis_text",
-           "write_diagnosis"]
+__all__ = ["KINDS", "Hypothesis", "candidate_hypotheses", "Diagnosis", "diagnose"]
 
 _LAZY = {"KINDS": ".hypotheses", "Hypothesis": ".hypotheses", "candidate_hypotheses": ".hypotheses",
-         "Diagnosis": ".procedure", "diagnose": ".procedure", "diagnosis_text": ".report",
-         "write_diagnosis": ".report"}
+         "Diagnosis": ".procedure", "diagnose": ".procedure"}
 
 
 def __getattr__(name: str):
@@ -19,3 +16,7 @@ def __getattr__(name: str):
 
         return getattr(import_module(_LAZY[name], __name__), name)
     raise AttributeError(f"module 'geoback.diagnosis' has no attribute '{name}'")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..case import Parameter
-from ..estimate import Fit, Settings
-from ..misfit import Misfit
-from .depth import DepthProfile, profile_depth
-from .hypotheses import Hypothesis
-from .results import Round, Scored
+from geoback.case.loading import Parameter
+from geoback.inference.estimate import Fit, Settings
+from geoback.inference.misfit import Misfit
+from geoback.diagnosis.depth import DepthProfile, profile_depth
+from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge, lr_objective
+from geoback.diagnosis.hypotheses import Hypothesis
+from geoback.diagnosis.results import Round, Scored
 
 DEPTH_SEEDS = 7  # layer-boundary depths refitted evenly over a layer before bisection
 LOSING = 50.0  # J units: a boundary whose best seed depth is this far above another refit is not refined
@@ -20,7 +21,7 @@ def _split_layer_misfit(current: Misfit, case, loaded, layer: str, z: float, p_h
                         E_below: float) -> Misfit:
     """The current model with layer `layer` split at depth z into two meshed layers (conforming
     boundary) and the lower layer's modulus identified (starting from E_below, the others from p_hat)."""
-    from ..simulation import make_simulation
+    from geoback.physics.factory import make_simulation
 
     layers = list(case.ground.layers)
     i = [ly.name for ly in layers].index(layer)
@@ -36,7 +37,7 @@ def _split_layer_misfit(current: Misfit, case, loaded, layer: str, z: float, p_h
 
 def _moved_boundary_misfit(misfit: Misfit, below: str, z: float, start: np.ndarray) -> Misfit:
     """`misfit` (whose case has the meshed layer `below`) with that layer's top moved to depth z."""
-    from ..simulation import make_simulation
+    from geoback.physics.factory import make_simulation
 
     sim0 = misfit.simulation
     case = sim0.loaded.case
@@ -65,19 +66,18 @@ def _boundary_hypothesis(h: Hypothesis, layer: str, z: float, E0: float) -> Hypo
                       [Parameter(name=f"E[{layer}_below]", initial=E0)], {key: z}, group=h.group)
 
 
-def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], settings: Settings, method: str,
+def refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], settings: Settings, method: str,
                           say, rival_J: float | None = None) -> Scored:
     """Profile the boundary depth over a continuous depth (``depth.py``): conforming refits at seed
     depths (the three best-scored and a few spread over the layer), then a search for the minimum
     (not when the best seed is LOSING J units above `rival_J`, the best refit of another
     hypothesis: it cannot win); its 95 % interval is found if it is accepted."""
-    from .procedure import REFIT_ITERATIONS, _compare, _fit_and_assess, _lr_objective
     layer = group[0].hypothesis.key.split("[", 1)[1].split("@")[0]
     sim = current.simulation
     case = sim.loaded.case
     lo_z, hi_z = _layer_range(case, layer)
     E0 = float(current.values(cur_fit.p)[f"E[{layer}]"])
-    J0 = _lr_objective(current, cur_fit)
+    J0 = lr_objective(current, cur_fit)
     template = group[0]
 
     def refit_at(z: float, near: Scored | None) -> Scored:
@@ -85,8 +85,8 @@ def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], se
         misfit = _split_layer_misfit(current, case, sim.loaded, layer, z, start, E_start)
         t = Scored(_boundary_hypothesis(template.hypothesis, layer, z, E0), template.score, template.dof,
                    template.p_score, misfit=misfit)
-        t.refit, t.reliability = _fit_and_assess(misfit, settings, method, REFIT_ITERATIONS)
-        _compare(t, J0, 1)
+        t.refit, t.reliability = fit_and_assess(misfit, settings, method, REFIT_ITERATIONS)
+        compare(t, J0, 1)
         return t
 
     # the score is a linear approximation that can overrate deep boundaries: besides the three
@@ -102,9 +102,8 @@ def _refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], se
     return best
 
 
-def _reprofile_boundary(s: Scored, misfit: Misfit, f: Fit, settings: Settings, method: str, say) -> DepthProfile:
+def reprofile_boundary(s: Scored, misfit: Misfit, f: Fit, settings: Settings, method: str, say) -> DepthProfile:
     """The depth of an accepted boundary profiled again in a model with more effects added after it."""
-    from .procedure import REFIT_ITERATIONS, _fit_and_assess
     layer = s.profile.layer
     below = f"{layer}_below"
 
@@ -112,7 +111,7 @@ def _reprofile_boundary(s: Scored, misfit: Misfit, f: Fit, settings: Settings, m
         m = _moved_boundary_misfit(misfit, below, z, f.p if near is None else near.refit.p)
         t = Scored(_boundary_hypothesis(s.hypothesis, layer, z, s.hypothesis.parameters[0].initial), s.score,
                    s.dof, s.p_score, misfit=m)
-        t.refit, t.reliability = _fit_and_assess(m, settings, method, REFIT_ITERATIONS)
+        t.refit, t.reliability = fit_and_assess(m, settings, method, REFIT_ITERATIONS)
         return t
 
     old = s.profile
@@ -121,17 +120,16 @@ def _reprofile_boundary(s: Scored, misfit: Misfit, f: Fit, settings: Settings, m
                          _depth_tolerance(old.lo_limit, old.hi_limit), say)
 
 
-def _boundary_interval(rnd: Round, say) -> None:
+def boundary_interval(rnd: Round, say) -> None:
     """An accepted boundary: its depth's 95 % interval (a few more refits); if looking for an end
     found a better depth, that depth is the accepted one."""
-    from .procedure import _judge
     acc = rnd.accepted
     say(f"profile-likelihood interval of the boundary depth in '{acc.profile.layer}'")
     prof = acc.profile.interval()
     best = prof.best
     if best is not acc:
         best.profile, best.p_score = prof, acc.p_score
-        _judge(best)
+        judge(best)
         rnd.ranking[rnd.ranking.index(acc)] = best
         rnd.accepted, rnd.tentative = best, not best.determined
     rnd.accepted.hypothesis.description += f" The boundary's {prof.text()}."

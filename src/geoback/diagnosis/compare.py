@@ -181,7 +181,7 @@ def detectable_text(ranking, level: float = None) -> str:
 
 def _size(name: str, v: float, s) -> str:
     """The detectable change of parameter `name` in words ('' when beyond anything plausible)."""
-    from ..limits import BIAS_SHIFT, CONSTANT_ANGLE, CONSTANT_LENGTH, DEPTH_OFFSET
+    from geoback.case.limits import BIAS_SHIFT, CONSTANT_ANGLE, CONSTANT_LENGTH, DEPTH_OFFSET
 
     stem = name.split("[")[0]
     p = next(q for q in s.hypothesis.parameters if q.name == name)

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..case import Parameter
+from geoback.case.loading import Parameter
 
 
 @dataclass
@@ -178,7 +178,7 @@ def _instrument_error_hypotheses(block, case, available: set) -> list[Hypothesis
 def _construction_hypotheses(case, values: dict, baseline: set) -> list[Hypothesis]:
     """Staged construction with a lining: the release before the lining acts (the CCM's beta) and
     the lining's stiffness, each free from its assumed value."""
-    from ..construction import StagePlan
+    from geoback.case.construction import StagePlan
 
     plan = StagePlan.of(case)
     out: list[Hypothesis] = []

@@ -51,24 +51,19 @@ from __future__ import annotations
 import numpy as np
 from scipy import special
 
-from ..estimate import Fit, Settings, fit
-from ..identification import Identification, conclude
-from ..misfit import Misfit
-from ..reliability import Reliability, chi2_sf
-from ..simulation import is_instrument_term
-from . import yielding
-from .compare import EQUAL_AIC, akaike_weights, detectable_lambda, separation
-from .hypotheses import Hypothesis, candidate_hypotheses
-from .boundary import _boundary_interval, _refit_layer_boundary, _reprofile_boundary
-from .results import NO_ADDITION, Diagnosis, Mismatch, Round, Scored, _settled  # noqa: F401 (Mismatch: re-exported)
+from geoback.inference.estimate import Fit, Settings, fit
+from geoback.inference.identification import Identification, conclude
+from geoback.inference.misfit import Misfit
+from geoback.inference.reliability import Reliability, chi2_sf
+from geoback.physics.simulation import is_instrument_term
+from geoback.diagnosis import yielding
+from geoback.diagnosis.compare import EQUAL_AIC, akaike_weights, detectable_lambda, separation
+from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge
+from geoback.diagnosis.hypotheses import Hypothesis, candidate_hypotheses
+from geoback.diagnosis.boundary import boundary_interval, refit_layer_boundary, reprofile_boundary
+from geoback.diagnosis.results import NO_ADDITION, Diagnosis, Mismatch, Round, Scored, settled  # noqa: F401 (Mismatch: re-exported)
 
 COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mimic
-REFIT_ITERATIONS = 100
-
-
-def _fit_and_assess(misfit: Misfit, settings: Settings, method: str, max_iterations=None):
-    res = fit(misfit, settings, method=method, max_iterations=max_iterations)
-    return res, conclude(misfit, res, None, "", {}, {}).reliability
 
 
 def scale_tests(rel: Reliability, alpha: float) -> tuple[list, float]:
@@ -197,14 +192,6 @@ def _modelled(misfit: Misfit, h: Hypothesis) -> bool:
     return all(sim.canonical(q.name) is not None for q in h.parameters if not is_instrument_term(q.name))
 
 
-def _lr_objective(misfit: Misfit, f: Fit) -> float:
-    """What a likelihood ratio compares: J, or with estimated scales the support function maximised
-    over them (maximum-likelihood profile; restricted likelihoods of different models don't compare)."""
-    if not misfit.free:
-        return f.J
-    return misfit.evaluate(f.p).support
-
-
 def _group(s: Scored) -> str:
     """The group a hypothesis is tested in (the depths of one layer boundary; else itself)."""
     return s.hypothesis.group or s.hypothesis.key
@@ -252,34 +239,6 @@ def _choose(significant: list[Scored]) -> tuple[Scored | None, bool]:
     return best, not best.determined
 
 
-def _judge(s: Scored) -> None:
-    """Whether the readings determine the refit's extra parameters: no 'not-determined' or
-    'at-bound' caveat (geoback.caveats) on any of them."""
-    from ..caveats import fit_caveats
-    from ..parameters import parameter_limits
-
-    misfit, f = s.misfit, s.refit
-    values = misfit.values(f.p)
-    limits = [parameter_limits(misfit.simulation, n, values) for n in misfit.parameters.names]
-    mine = set(s.hypothesis.names)
-    found = fit_caveats(f, s.reliability, misfit.parameters, limits, {})
-    s.caveats = [c for c in found if c.code in ("not-determined", "at-bound")
-                 and (c.parameter in mine or (c.parameter is None and any(n in c.message for n in mine)))]
-    s.determined = not s.caveats
-
-
-def _compare(s: Scored, J0: float, searched: int) -> None:
-    """Likelihood-ratio test and information criteria of a refitted hypothesis; `searched` counts
-    extra quantities chosen by search rather than by the fit (a boundary's depth)."""
-    extra = len(s.hypothesis.parameters) + searched
-    s.J0 = J0
-    s.dJ = J0 - _lr_objective(s.misfit, s.refit)
-    s.p_lr = chi2_sf(max(s.dJ, 0.0), extra)
-    m = len(s.reliability.whitened_residual)
-    s.aic = s.reliability.aic + 2 * searched
-    s.bic = s.reliability.bic + searched * np.log(m)
-
-
 def _weigh(rnd: Round, cur_rel: Reliability, data) -> None:
     """Akaike weights of the round's refitted hypotheses and of its model without them; the rival
     of the accepted one (within 2 AIC) and the readings that would tell the two apart."""
@@ -321,12 +280,12 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     """Find what the model is missing (see the module docstring). case: a LoadedCase or an Analysis."""
     import time
 
-    from ..identification import Analysis, prepare
+    from geoback.inference.identification import Analysis, prepare
 
     t_start = time.perf_counter()
     analysis = case if isinstance(case, Analysis) else prepare(case)
     if analysis.misfit is None:
-        from ..errors import GeobackError
+        from geoback.errors import GeobackError
 
         raise GeobackError("the case has instruments without readings: give 'readings' or 'readings_file' "
                            "for every instrument to diagnose it")
@@ -369,27 +328,27 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
                 group = sorted((t for t in scored if t.hypothesis.group == s.hypothesis.group), key=lambda t: -t.score)
                 plain = [t.refit.J for t in chosen if not t.hypothesis.group and t.settled]
                 try:
-                    winner = _refit_layer_boundary(current, cur_fit, group, settings, method, say,
+                    winner = refit_layer_boundary(current, cur_fit, group, settings, method, say,
                                                    min(plain) if plain else None)
                 except RuntimeError as exc:
                     say(f"  {exc}")
                     continue
                 winner.p_score = s.p_score
                 ranking[ranking.index(s)] = winner
-                _judge(winner)
+                judge(winner)
                 continue
             say(f"refitting with {s.hypothesis.title}")
-            s.refit, s.reliability = _fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
-            _compare(s, s.J0, 0)
-            _judge(s)
+            s.refit, s.reliability = fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
+            compare(s, s.J0, 0)
+            judge(s)
         for y in (yielding.refit(h, current, cur_fit, settings, method, say) for h in unscored):
             if y is not None:
-                _judge(y)
+                judge(y)
                 ranking.append(y)
-        significant = [s for s in ranking if s.refit is not None and s.p_lr < threshold and _settled(s.refit)]
+        significant = [s for s in ranking if s.refit is not None and s.p_lr < threshold and settled(s.refit)]
         rnd.accepted, rnd.tentative = _choose(significant)
         if rnd.accepted is not None and rnd.accepted.profile is not None:
-            _boundary_interval(rnd, say)
+            boundary_interval(rnd, say)
         _weigh(rnd, cur_rel, current.data)
         if rnd.accepted is None:
             rnd.adequate = chi2_ok and scales_ok  # nothing in the library does better
@@ -400,7 +359,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     for j, s in enumerate(accepted):  # a boundary accepted before other effects: its depth in the final model
         if s.profile is not None and j < len(accepted) - 1:
             say(f"profiling the boundary depth in '{s.profile.layer}' again in the final model")
-            prof = _reprofile_boundary(s, current, cur_fit, settings, method, say)
+            prof = reprofile_boundary(s, current, cur_fit, settings, method, say)
             if prof.points:
                 final_profiles[s.hypothesis.key] = prof
                 best = prof.best
@@ -418,8 +377,8 @@ def _open_intervals(final: Identification, misfit: Misfit, settings: Settings, n
     missing physics is where the model is most non-linear in its parameters: a modulus gradient, a
     stratum's modulus; a few dozen fast fits each). An end at a limit (a bound or the allowed range)
     is open: the readings do not bound the parameter there."""
-    from ..parameters import parameter_limits
-    from ..profile import profile_interval
+    from geoback.inference.parameters import parameter_limits
+    from geoback.inference.profile import profile_interval
 
     out = {}
     params, f, rel = misfit.parameters, final.fit, final.reliability

@@ -6,14 +6,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..estimate import Fit
-from ..identification import Identification
-from ..misfit import Misfit
-from ..reliability import Reliability
-from .depth import DepthProfile
-from .hypotheses import Hypothesis
-
-STALLED = 0.01  # a refit whose J fell by less than this in its last step has stopped moving
+from geoback.inference.estimate import Fit
+from geoback.inference.identification import Identification
+from geoback.inference.misfit import Misfit
+from geoback.inference.reliability import Reliability
+from geoback.diagnosis.depth import DepthProfile
+from geoback.diagnosis.hypotheses import Hypothesis
 
 
 @dataclass
@@ -51,7 +49,7 @@ class Scored:
 
     @property
     def settled(self) -> bool:
-        return self.refit is not None and _settled(self.refit)
+        return self.refit is not None and settled(self.refit)
 
 
 @dataclass
@@ -156,7 +154,12 @@ class Diagnosis:
 
 
 # ---------------------------------------------------------------------------------------------
-def _settled(f: Fit) -> bool:
+
+
+STALLED = 0.01  # a refit whose J fell by less than this in its last step has stopped moving
+
+
+def settled(f: Fit) -> bool:
     """Converged, or stopped by the iteration limit while J no longer moves."""
     if f.status == "converged":
         return True

@@ -38,10 +38,12 @@ import math
 
 import numpy as np
 
-from ..case import Parameter
-from ..errors import ForwardFailure
-from .extensions import EXTENSIONS
-from .hypotheses import KINDS, Hypothesis
+from geoback.case.loading import Parameter
+from geoback.errors import ForwardFailure
+from geoback.physics.extensions import EXTENSIONS
+from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, lr_objective
+from geoback.diagnosis.results import Scored
+from geoback.diagnosis.hypotheses import KINDS, Hypothesis
 
 PHI = 30.0  # degrees: friction angle of the refit (fixed)
 PSI = 0.0  # degrees: dilation angle of the refit (fixed; no volume change in shear)
@@ -111,8 +113,7 @@ def refit(h: Hypothesis, current, cur_fit, settings, method: str, say):
     """The baseline with the hypothesis' layer made mohr-coulomb, fitted; a procedure.Scored with its
     likelihood-ratio test (score and its p-value are NaN: there is none), or None if the yielding
     model cannot be solved from its start."""
-    from ..plastic import PlasticSimulation
-    from .procedure import REFIT_ITERATIONS, Scored, _compare, _fit_and_assess, _lr_objective
+    from geoback.physics.plastic import PlasticSimulation
 
     sim = current.simulation
     loaded = sim.loaded
@@ -131,7 +132,7 @@ def refit(h: Hypothesis, current, cur_fit, settings, method: str, say):
                                         backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
             s.misfit = current.extended([spec.model_copy(update={"initial": c0})], simulation=plastic,
                                         start=cur_fit.p)
-            s.refit, s.reliability = _fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
+            s.refit, s.reliability = fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
         except ForwardFailure as exc:
             say(f"  not refitted from c' = {c0:.3g} kPa: {exc}")
             continue
@@ -139,5 +140,5 @@ def refit(h: Hypothesis, current, cur_fit, settings, method: str, say):
             best = s
     if best is None:
         return None
-    _compare(best, _lr_objective(current, cur_fit), 0)
+    compare(best, lr_objective(current, cur_fit), 0)
     return best

@@ -1,0 +1,308 @@
+"""How big a case's mesh will be, and what it will cost, known before gmsh runs.
+
+gmsh meshes the half-model with the background size field of :mod:`geoback.physics.mesh`: the size
+grows linearly from ``size_tunnel`` at the tunnel wall (and from ``size_instruments`` near the
+instruments) by ``growth`` per metre of distance, up to ``size_far``. A triangulation with local
+edge length h holds about ``ELEMENTS_PER_H2 / h²`` triangles per unit area, so the number of
+triangles is that density integrated over the ground. :func:`estimate` integrates it on cells
+refined until each is no larger than the local element size (the field is smooth there), so it
+follows the size field exactly, tunnel, instruments and domain clipping included; the constant
+was fitted to real gmsh meshes (``benchmarks/mesh_estimate.py``: the estimate is within 10 % of
+gmsh's counts of elements and nodes over cases from 300 to 200,000 elements, growth up to 1; it
+over-estimates refinement around instruments with a faster growth, by up to 60 % at growth 2).
+
+Costs are in DOFs (two per node; quadratic triangles have about 2 nodes per triangle, linear
+about 1/2) and in the peak memory of ``geoback run``, fitted to measured runs on the reference
+machine (same benchmark). ``DEFAULT_MAX_DOFS`` is the default limit (``GEOBACK_MAX_DOFS`` in the
+environment changes it): cases above it are refused before any meshing, with the estimate in the
+message, unless ``allow_large`` (``--allow-large``) is given; ``HARD_MAX_DOFS`` is refused even then (gmsh and the sparse solvers index with 32-bit
+integers, and no machine this runs on has the memory).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from geoback.case.schema import Case
+
+# triangles = AREA * integral of dA/h² + BOUNDARY * (edges on the boundary) + INTERFACE * (edges on
+# layer interfaces); 4/sqrt(3) = 2.31 would be equilateral triangles. Fitted to gmsh 4 meshes.
+AREA_FACTOR = 2.26
+BOUNDARY_FACTOR = 0.63
+INTERFACE_FACTOR = 0.92
+HARD_MAX_DOFS = 50_000_000
+# peak resident memory of `geoback run` ~ BASE + PER_DOF * dofs, fitted to runs of the paper case
+# from 9 k to 770 k DOFs (benchmarks/mesh_estimate.py --costs): 0.14 GB at 9 k DOFs, 0.65 GB at
+# 127 k, 1.6 GB at 440 k (48 s), 2.7 GB at 770 k (95 s); linear elements 0.74 GB at 194 k
+RUN_BASE_BYTES = 150e6
+RUN_BYTES_PER_DOF = {1: 3_000.0, 2: 3_300.0}
+DEFAULT_MAX_DOFS = 500_000  # default limit: `run` of such a case takes about 1 min and 1.8 GB
+
+
+def max_dofs() -> float:
+    """The default limit: DEFAULT_MAX_DOFS, or the environment variable GEOBACK_MAX_DOFS (a
+    machine with more memory may raise it; tests lower it)."""
+    import os
+
+    text = os.environ.get("GEOBACK_MAX_DOFS", "").strip().replace("_", "")
+    if text:
+        try:
+            value = float(text)
+            if value > 0:
+                return value
+        except ValueError:
+            pass
+        from geoback.errors import GeobackError
+
+        raise GeobackError(f"GEOBACK_MAX_DOFS: expected a positive number of DOFs, found '{text}'")
+    return DEFAULT_MAX_DOFS
+
+
+FIELDS = ("size_far", "size_tunnel", "size_instruments")
+_MAX_CELLS = 200_000  # cells in flight while integrating (bounds the estimate's own work: ~0.1 s)
+
+
+@dataclass(frozen=True)
+class MeshEstimate:
+    """Estimated size and cost of a case's mesh."""
+
+    elements: float
+    nodes: float
+    dofs: float
+    run_bytes: float  # peak memory of `geoback run`
+    order: int
+    by_field: dict = field(default_factory=dict)  # elements where each size setting rules
+
+    @property
+    def worst(self) -> str:
+        """The mesh setting responsible for most elements."""
+        return max(self.by_field, key=self.by_field.get) if self.by_field else "size_far"
+
+    def describe(self) -> str:
+        """'about 2.1 M DOFs, ~9 GB'."""
+        return f"about {_count(self.dofs)} DOFs, ~{_bytes(self.run_bytes)}"
+
+
+def _sig(x: float) -> str:
+    """Two significant digits, never in exponent form: 1.2, 12, 120."""
+    text = f"{x:.2g}"
+    return f"{float(text):.0f}" if "e" in text else text
+
+
+def _count(n: float) -> str:
+    if not math.isfinite(n):
+        return "more than 10^300"
+    if n >= 1e9:
+        return f"{_sig(n / 1e9)} G"
+    if n >= 1e6:
+        return f"{_sig(n / 1e6)} M"
+    if n >= 1e4:
+        return f"{round(n, -3):,.0f}"
+    return f"{round(n, -1):,.0f}" if n >= 100 else f"{n:.0f}"
+
+
+def _bytes(b: float) -> str:
+    if not math.isfinite(b):
+        return "unbounded memory"
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+        if b >= scale:
+            return f"{_sig(b / scale)} {unit}"
+    return f"{b / 1e3:.0f} kB"
+
+
+def estimate(inputs: dict) -> MeshEstimate:
+    """Estimate from :func:`mesh_inputs` (a plain dict; no gmsh involved)."""
+    order = int(inputs.get("order", 2))
+    try:
+        counts, boundary = _integrate(inputs)
+    except (ZeroDivisionError, OverflowError, ValueError, FloatingPointError, MemoryError):
+        counts, boundary = {"size_far": math.inf}, math.inf
+    elements = float(sum(counts.values()))
+    # Euler: a triangulation with T triangles and B boundary edges has (T + B)/2 + 1 vertices and
+    # (3T + B)/2 edges; quadratic elements have a node on every edge as well
+    nodes = 2 * elements + boundary + 1 if order == 2 else (elements + boundary) / 2 + 1
+    dofs = 2.0 * nodes
+    return MeshEstimate(elements, nodes, dofs, run_bytes(dofs, order), order, counts)
+
+
+def run_bytes(dofs: float, order: int = 2) -> float:
+    """Peak memory of `geoback run` at this many DOFs (bytes)."""
+    return RUN_BASE_BYTES + RUN_BYTES_PER_DOF.get(order, 3_300.0) * dofs
+
+
+def _size_field(inputs: dict, pts: np.ndarray | None):
+    """Vectorised background size h(x, y) of gmsh's field and the index of the ruling setting."""
+    g = inputs["geometry"]
+    R, a = float(g["radius"]), float(g["axis_depth"])
+    t, far = float(inputs["size_tunnel"]), float(inputs["size_far"])
+    # gmsh places a layer of elements, then sizes the next from where it stands: the spacing grows
+    # geometrically, by (1 + growth) per layer, which is a linear field of slope log(1 + growth)
+    growth = math.log1p(float(inputs["growth"]))
+    si = inputs.get("size_instruments")
+
+    def h(x: np.ndarray, y: np.ndarray, slack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`slack`: half-diagonal of the cell; distances are taken at the nearest point of it."""
+        d = np.maximum(np.abs(np.hypot(x, y + a) - R) - slack, 0.0)
+        ht = np.minimum(t + growth * d, far) if far > t else np.full_like(x, far)
+        which = np.where(ht < far, 1, 0)
+        size = ht
+        if si and pts is not None and len(pts) and far > si:
+            di = np.full_like(x, np.inf)
+            for k in range(0, len(pts), 64):
+                p = pts[k:k + 64]
+                di = np.minimum(di, np.sqrt((x[:, None] - p[None, :, 0]) ** 2
+                                            + (y[:, None] - p[None, :, 1]) ** 2).min(axis=1))
+            di = np.maximum(di - slack, 0.0)
+            hi = np.clip(si + growth * (di - si), si, far)
+            which = np.where(hi < size, 2, which)
+            size = np.minimum(size, hi)
+        return size, which
+
+    return h
+
+
+def _integrate(inputs: dict) -> tuple[dict[str, float], float]:
+    """Triangles by ruling size setting, and the number of boundary edges."""
+    g = inputs["geometry"]
+    W, H, R, a = float(g["width"]), float(g["depth"]), float(g["radius"]), float(g["axis_depth"])
+    pts = np.asarray(inputs.get("instrument_points") or [], float).reshape(-1, 2)
+    h = _size_field(inputs, pts)
+    side = min(W, H) / 4
+    nx, ny = max(1, math.ceil(W / side)), max(1, math.ceil(H / side))
+    if nx * ny > _MAX_CELLS:
+        raise ValueError("degenerate domain")
+    ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    hx, hy = W / nx / 2, H / ny / 2
+    cx, cy = (2 * ix.ravel() + 1) * hx, -(2 * iy.ravel() + 1) * hy
+    totals = np.zeros(3)
+    for level in range(60):
+        half_diag = math.hypot(hx, hy)
+        r = np.hypot(cx, cy + a)
+        keep = r + half_diag > R  # cells wholly inside the excavated tunnel hold no ground
+        cx, cy, r = cx[keep], cy[keep], r[keep]
+        size, which = h(cx, cy, np.zeros_like(cx))
+        split = 2 * max(hx, hy) > size
+        last = level == 59 or 4 * int(split.sum()) > _MAX_CELLS
+        done = ~split if not last else np.ones_like(split)
+        area = 4 * hx * hy
+        hc = size[done]
+        if last:  # cells still larger than their elements: between the centre's size and that of
+            lo, _ = h(cx[done], cy[done], np.full(int(done.sum()), half_diag))  # the point nearest the wall
+            hc = np.where(split[done], np.sqrt(lo * hc), hc)
+        inside = np.where(r[done] >= R, 1.0, 0.0) if 2 * max(hx, hy) < R else \
+            np.clip((r[done] + half_diag - R) / (2 * half_diag), 0.0, 1.0)
+        np.add.at(totals, which[done], area * inside / hc ** 2)
+        if last:
+            break
+        cx, cy = cx[split], cy[split]
+        hx, hy = hx / 2, hy / 2
+        cx = np.concatenate([cx - hx, cx + hx, cx - hx, cx + hx])
+        cy = np.concatenate([cy - hy, cy - hy, cy + hy, cy + hy])
+        if len(cx) == 0:
+            break
+    totals *= AREA_FACTOR
+    boundary, interfaces = _edges(inputs, h)
+    totals[1] += BOUNDARY_FACTOR * boundary + INTERFACE_FACTOR * interfaces  # mostly along the wall
+    return dict(zip(FIELDS, map(float, totals))), boundary
+
+
+def _edges(inputs: dict, h) -> tuple[float, float]:
+    """Element edges on the model's boundary (tunnel wall included) and on layer interfaces:
+    the integral of ds/h along them."""
+    g = inputs["geometry"]
+    W, H, R, a = float(g["width"]), float(g["depth"]), float(g["radius"]), float(g["axis_depth"])
+    s = np.unique(np.concatenate([np.linspace(0, 1, 2001), np.geomspace(1e-9, 1, 400),
+                                  1 - np.geomspace(1e-9, 1, 400)]))
+
+    def along(p0, p1) -> float:
+        x = p0[0] + (p1[0] - p0[0]) * s
+        y = p0[1] + (p1[1] - p0[1]) * s
+        size, _ = h(x, y, np.zeros_like(x))
+        ground = np.hypot(x, y + a) >= R
+        return math.hypot(p1[0] - p0[0], p1[1] - p0[1]) * float(np.trapezoid(ground / size, s))
+
+    outer = [((0, 0), (W, 0)), ((W, 0), (W, -H)), ((W, -H), (0, -H)), ((0, -H), (0, -(a + R))),
+             ((0, -(a - R)), (0, 0))]
+    boundary = sum(along(p0, p1) for p0, p1 in outer)
+    theta = np.linspace(-math.pi / 2, math.pi / 2, 2001)
+    x, y = R * np.cos(theta), -a + R * np.sin(theta)
+    size, _ = h(x, y, np.zeros_like(x))
+    boundary += R * float(np.trapezoid(1 / size, theta))
+    interfaces = sum(along((0, -top), (W, -top)) for top in inputs.get("tops", [])[1:])
+    return boundary, interfaces
+
+
+def size_problem(inputs: dict, allow_large: bool = False, settings: dict | None = None,
+                 max_dofs: float | None = None) -> tuple[str, str] | None:
+    """(mesh setting to blame, message) when the mesh would exceed the limit; None when it fits.
+
+    `settings` maps a mesh setting to the value written in the case (None for a default), for
+    the message. The message reads 'expected ..., found ...; lower ... or pass --allow-large'.
+    """
+    est = estimate(inputs)
+    limit = HARD_MAX_DOFS if allow_large else (globals()["max_dofs"]() if max_dofs is None else max_dofs)
+    if est.dofs <= limit:
+        return None
+    worst = est.worst
+    written = (settings or {}).get(worst)
+    value = f"{worst} {written:g}" if isinstance(written, (int, float)) else f"{worst} (default {inputs.get(worst, 0):g})"
+    cap = run_bytes(limit, est.order)
+    message = (f"expected mesh sizes giving at most {_count(limit)} DOFs (~{_bytes(cap)} to run), found sizes "
+               f"giving {est.describe()} (about {_count(est.elements)} elements, mostly from {value}); ")
+    if allow_large:
+        message += "coarsen the mesh (larger sizes): this is beyond what geoback can solve"
+    else:
+        message += "coarsen the mesh (larger mesh sizes) or pass --allow-large"
+    return worst, message
+
+
+MESH_FORMAT = 5  # bump when the meshing procedure or the cache layout changes, to invalidate caches
+
+
+def mesh_inputs(case: Case) -> dict:
+    """Everything the mesh depends on (and nothing else)."""
+    g, m = case.geometry, case.mesh
+    return {
+        "format": MESH_FORMAT,
+        "geometry": g.model_dump(),
+        "tops": [layer.top for layer in case.ground.layers],
+        "names": [layer.name for layer in case.ground.layers],
+        "size_tunnel": m.size_tunnel or g.radius / 8,
+        "size_far": m.size_far or max(g.width, g.depth) / 12,
+        "size_instruments": m.size_instruments,
+        "instrument_points": instrument_refinement_points(case) if m.size_instruments else [],
+        "order": m.order,
+        "growth": m.growth,
+    }
+
+
+def instrument_refinement_points(case: Case) -> list[list[float]]:
+    """Sample points along every instrument, where the mesh is refined if asked."""
+    pts: list[list[float]] = []
+    for ins in case.instruments:
+        kind = ins.kind
+        if kind == "points":
+            pts += [list(p) for p in ins.points]
+        elif kind == "convergence":
+            pts += [list(p) for p in ins.points]
+        elif kind == "inclinometer":
+            for d in np.linspace(ins.head_depth, ins.toe_depth, 25):
+                pts.append([ins.x, -float(d)])
+        else:
+            a, b = np.array(ins.start), np.array(ins.end)
+            for s in np.linspace(0, 1, 25):
+                pts.append(list(map(float, a + s * (b - a))))
+    return pts
+
+
+def refined_case(case, factor: float):
+    """The same case meshed `factor` times finer (for data that avoids the inverse crime)."""
+    sizes = mesh_inputs(case)
+    mesh = case.mesh.model_copy(update={
+        "size_tunnel": sizes["size_tunnel"] / factor,
+        "size_far": sizes["size_far"] / factor,
+        "size_instruments": (sizes["size_instruments"] / factor) if sizes["size_instruments"] else None,
+    })
+    return case.model_copy(update={"mesh": mesh})

@@ -1,0 +1,505 @@
+"""The case file's schema: pydantic models of every section, and the value parsers they use
+(numbers, flags, stresses with units). Units are SI throughout: lengths in m, stresses and moduli
+in kPa (a string such as ``"10 MPa"`` is also accepted for a stress), unit weight in kN/m³, angles in
+rad, except the friction and dilation angles of a mohr-coulomb layer, in degrees as engineers
+write them. Coordinates are those of the half-model: symmetry axis x = 0, ground surface y = 0,
+y up (depth = -y). Imports nothing else of geoback's case modules (case.py loads and validates)."""
+from __future__ import annotations
+
+import math
+import re
+from typing import Annotated, Any, Literal, Optional, Union
+
+from pydantic import (BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, Tag,
+                      field_validator, model_validator)
+
+from geoback.case.yamlmarks import printable
+
+_UNITS = {"pa": 1e-3, "kpa": 1.0, "mpa": 1e3, "gpa": 1e6}
+
+
+def number_text(x: float) -> str:
+    """A number as a person writes it (general format)."""
+    return f"{x:g}"
+
+
+def shown(value: Any) -> str:
+    """A found value, shown as it would read in the file."""
+    if value is None:
+        return "nothing (an empty value)"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        if math.isnan(value):
+            return ".nan (not a number)"
+        if math.isinf(value):
+            return "infinity" if value > 0 else "minus infinity"
+        return f"{value:g}"
+    if isinstance(value, int):
+        text = str(value)
+        return text if len(text) <= 20 else f"a {len(text)}-digit number"
+    if isinstance(value, str):
+        text = value if len(value) <= 50 else value[:47] + "..."
+        return "an empty string" if not value else repr(text)
+    if isinstance(value, dict):
+        keys = ", ".join(printable(k) for k in list(value)[:6]) + (", ..." if len(value) > 6 else "")
+        return f"a mapping ({keys})" if value else "an empty mapping {}"
+    if isinstance(value, (list, tuple)):
+        if not value:
+            return "an empty list []"
+        return f"a list of {len(value)} item{'s' if len(value) != 1 else ''}"
+    return type(value).__name__
+
+
+def _number(value: Any) -> Any:
+    """Numbers only: reject true/false (YAML's yes/no), NaN, infinities and overflowing integers."""
+    if isinstance(value, bool):
+        raise ValueError(f"expected a number, found {shown(value)}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"expected a finite number, found {shown(value)}")
+    if isinstance(value, int) and abs(value) > 1e300:
+        raise ValueError(f"expected a finite number, found {shown(value)}")
+    return value
+
+
+def _flag(value: Any) -> Any:
+    if not isinstance(value, bool):
+        raise ValueError(f"expected true or false, found {shown(value)}")
+    return value
+
+
+def _whole(value: Any) -> Any:
+    if isinstance(value, bool):
+        raise ValueError(f"expected a whole number, found {shown(value)}")
+    return value
+
+
+def _stress(value: Any) -> Any:
+    """Accept numbers (kPa) or strings with an explicit unit: '10 MPa', '2e4 kPa'."""
+    if isinstance(value, str):
+        m = re.fullmatch(r"\s*([-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?)\s*([A-Za-z/]+)?\s*", value)
+        if not m:
+            raise ValueError(f"expected a stress: a number in kPa or a number with a unit like '10 MPa', "
+                             f"found {shown(value)}")
+        if m.group(2) and m.group(2).lower() not in _UNITS:
+            raise ValueError(f"expected a unit Pa, kPa, MPa or GPa after the number, found '{m.group(2)}' "
+                             f"in {shown(value)}")
+        number = float(m.group(1)) * _UNITS[(m.group(2) or "kpa").lower()]
+        if not math.isfinite(number):
+            raise ValueError(f"expected a finite stress, found {shown(value)}")
+        return number
+    return _number(value)
+
+
+Stress = Annotated[float, BeforeValidator(_stress)]
+Num = Annotated[float, BeforeValidator(_number)]
+Positive = Annotated[float, BeforeValidator(_number), Field(gt=0)]
+NonNegative = Annotated[float, BeforeValidator(_number), Field(ge=0)]
+Count = Annotated[int, BeforeValidator(_whole)]
+Point = tuple[Num, Num]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Geometry(Strict):
+    """Half-model of a circular tunnel: x from 0 (symmetry axis) to `width`, y from -`depth` to 0."""
+
+    radius: Positive = Field(description="tunnel radius R [m]")
+    axis_depth: Positive = Field(description="depth of the tunnel axis below the surface [m]")
+    width: Positive = Field(description="width of the half-model (symmetry axis to far side) [m]")
+    depth: Positive = Field(description="depth of the model's bottom boundary below the surface [m]")
+
+
+GROUND_MODELS = ("linear-elastic", "mohr-coulomb")
+MC_FIELDS = ("c", "phi", "psi", "tension")  # the strength of a mohr-coulomb layer
+Angle = Annotated[float, BeforeValidator(_number)]
+
+
+class Layer(Strict):
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$", description="layer name (letters, digits, _ -)")
+    top: NonNegative = Field(description="depth of the layer's top [m]; the first layer starts at 0")
+    E: Stress = Field(gt=0, description="Young's modulus [kPa] (or '10 MPa')")
+    nu: Num = Field(ge=0.0, lt=0.5, description="Poisson's ratio, 0 <= nu < 0.5")
+    K0: Optional[Positive] = Field(None, description="coefficient of earth pressure at rest of this layer")
+    model: Literal["linear-elastic", "mohr-coulomb"] = Field(
+        "linear-elastic", description="'linear-elastic', or 'mohr-coulomb': elastic-perfectly plastic with the strength "
+                                      "c, phi, dilation psi and an optional tension cut-off")
+    c: Optional[Stress] = Field(None, ge=0, description="mohr-coulomb: cohesion c' [kPa] (or '20 kPa'), at least 0")
+    phi: Optional[Angle] = Field(None, gt=0, lt=70, description="mohr-coulomb: friction angle phi' [degrees], "
+                                                                "0 < phi < 70")
+    psi: Optional[Angle] = Field(None, ge=0, lt=70, description="mohr-coulomb: dilation angle psi [degrees], "
+                                                                "0 <= psi <= phi (psi < phi: non-associated flow)")
+    tension: Optional[Stress] = Field(None, ge=0, description="mohr-coulomb, optional: tension cut-off [kPa], the "
+                                                              "largest tensile principal stress (at most c / tan phi)")
+
+
+class Ground(Strict):
+    unit_weight: Positive = Field(description="unit weight gamma [kN/m3]; sigma_v = -gamma*depth")
+    K0: Optional[Positive] = Field(None, description="K0 of all layers (unless a layer gives its own)")
+    layers: list[Layer] = Field(min_length=1)
+
+
+class MeshSettings(Strict):
+    size_tunnel: Optional[Positive] = Field(None, description="element size at the tunnel wall [m] (default R/8)")
+    size_far: Optional[Positive] = Field(None, description="element size far from the tunnel [m] (default domain/12)")
+    size_instruments: Optional[Positive] = Field(None, description="element size along instruments [m] (default: no refinement)")
+    order: Annotated[Literal[1, 2], BeforeValidator(_whole)] = Field(2, description="element order: 2 = quadratic triangles")
+    growth: Annotated[float, BeforeValidator(_number), Field(gt=0.01, le=2.0)] = Field(
+        0.25, description="element size grows by this fraction of the distance from the tunnel (and instruments)")
+
+
+NAME = r"^[A-Za-z0-9_\-.]+$"
+READING_UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "rad": 1.0, "mrad": 1e-3, "1/m": 1.0}
+
+
+def _readings_shape(value: Any) -> str:
+    return "by-stage" if isinstance(value, dict) else "in-order"
+
+
+StageName = Annotated[str, Field(pattern=NAME)]
+# a list in station order, or a mapping stage -> list; the tags name the two shapes (dropped from
+# error locations, which then follow the file: instruments[0].readings[3])
+Readings = Annotated[Union[Annotated[list[Num], Tag("in-order")],
+                           Annotated[dict[StageName, list[Num]], Tag("by-stage")]], Discriminator(_readings_shape)]
+
+
+class _Instrument(Strict):
+    name: str = Field(pattern=NAME, description="unique instrument name")
+    readings: Optional[Readings] = Field(
+        None, description="measured values in station order from the reference end (taken at the last construction "
+                          "stage), or a mapping stage: [values] for readings taken at several stages")
+    readings_file: Optional[str] = Field(
+        None, description="CSV or text file with the readings (relative to the case file): a header row with a value "
+                          "column (reading, value, measured or displacement), a position column (station, depth or "
+                          "distance from the reference end) unless the file lists one instrument in station order, "
+                          "and optionally instrument, component and stage columns; a unit in the header such as "
+                          "'reading [mm]'")
+    readings_unit: Optional[Literal["m", "mm", "cm", "rad", "mrad", "1/m"]] = Field(
+        None, description="unit of the readings (default SI: m for displacements and length changes, rad for slopes, "
+                          "1/m for curvatures)")
+
+
+class PointsInstrument(_Instrument):
+    """Settlement points, prisms: chosen displacement components at listed points."""
+
+    kind: Literal["points"]
+    points: list[Point] = Field(min_length=1, description="[x, y] of each point [m]")
+    components: list[Literal["ux", "uy"]] = Field(["ux", "uy"], min_length=1)
+    sigma: Positive = Field(description="standard deviation of each reading [m]")
+
+
+class _Linewise(_Instrument):
+    spacing: Optional[Positive] = Field(None, description="equal distance between stations [m]")
+    stations: Optional[Count] = Field(None, gt=0, description="number of stations (with spacing)")
+    lengths: Optional[list[Positive]] = Field(None, min_length=1,
+                                              description="distances l_1..l_n between stations from the reference end [m]")
+    reading_type: Literal["displacement", "primary"] = Field(
+        "displacement", description="readings given as integrated displacements or as primary readings")
+
+    @model_validator(mode="after")
+    def _stations(self):
+        if self.lengths is None and self.spacing is None:
+            raise ValueError("expected the stations as 'lengths' or as 'spacing' (with 'stations'), "
+                             "found neither")
+        if self.lengths is not None and (self.spacing is not None or self.stations is not None):
+            raise ValueError("expected the stations as 'lengths' or as 'spacing'/'stations', found both")
+        return self
+
+
+class Inclinometer(_Linewise):
+    """Vertical borehole at x; slopes integrated from the reference end (eqns 15-17)."""
+
+    kind: Literal["inclinometer"]
+    x: NonNegative = Field(description="horizontal position of the borehole [m]")
+    toe_depth: Positive = Field(description="depth of the borehole's toe [m]")
+    head_depth: NonNegative = Field(0.0, description="depth of the borehole's head [m]")
+    reference: Literal["toe", "head"] = Field("toe", description="end the readings are integrated from")
+    readings_relative: Annotated[bool, BeforeValidator(_flag)] = Field(
+        True, description="true (field practice): the readings are movements relative to the reference end, as "
+                          "integrated from an end assumed fixed, and the model is compared as u(z) - u(reference end); "
+                          "false: absolute displacements (the reference end surveyed)")
+    sigma: Positive = Field(description="standard deviation of one slope reading [rad]")
+    var_b: NonNegative = Field(0.0, description="variance of the integration constant B [m2]: the reference end's "
+                                                "movement beyond what the model computes for it")
+
+
+class SlidingMicrometer(_Linewise):
+    """Straight measuring line from `start` (reference end) towards `end` (eqns 11-14)."""
+
+    kind: Literal["sliding_micrometer", "extensometer"]
+    start: Point = Field(description="reference end [x, y] [m]")
+    end: Point = Field(description="other end [x, y] [m]; displacement is positive from start to end")
+    readings_relative: Annotated[bool, BeforeValidator(_flag)] = Field(
+        False, description="true: the readings are movements relative to the reference end (start), compared with "
+                           "u - u(start); false (default): absolute displacements (the head surveyed)")
+    sigma: Positive = Field(description="standard deviation of one length-change reading [m]")
+    var_a: NonNegative = Field(0.0, description="variance of the integration constant A [m2]")
+
+
+class Deflectometer(_Linewise):
+    """Straight line measuring curvatures; displacement normal to the line (eqns 18-20)."""
+
+    kind: Literal["deflectometer"]
+    start: Point
+    end: Point
+    sigma: Positive = Field(description="standard deviation of one curvature reading [1/m]")
+    var_c: NonNegative = Field(0.0, description="variance of the integration constant C [rad2]")
+    var_d: NonNegative = Field(0.0, description="variance of the integration constant D [m2]")
+
+
+class Convergence(_Instrument):
+    """A chord between two points on the tunnel wall; reads the change of its length [m]."""
+
+    kind: Literal["convergence"]
+    points: tuple[Point, Point]
+    sigma: Positive = Field(description="standard deviation of the reading [m]")
+
+
+Instrument = Annotated[Union[PointsInstrument, Inclinometer, SlidingMicrometer, Deflectometer,
+                             Convergence], Field(discriminator="kind")]
+
+
+class Prior(Strict):
+    mean: Num
+    std: Positive
+
+
+_NAME = r"^[A-Za-z0-9_\-.]+$"
+
+
+class ScalePrior(Strict):
+    """What is known of the factor k = true sigma / stated sigma before the readings: the stated
+    sigma is right within a factor `within` with probability `level` (1/within <= k <= within)."""
+
+    shape: Literal["lognormal", "inverse-chi2"] = Field(
+        "lognormal", description="prior of k: 'lognormal' (ln k normal) or 'inverse-chi2' (k^2 scaled "
+                                 "inverse-chi-square, centred on 1; conjugate: the prior counts as `dof` readings)")
+    within: Optional[Annotated[float, BeforeValidator(_number)]] = Field(
+        None, description="the true sigma is within this factor of the stated one (a number above 1, e.g. 2)")
+    level: Annotated[float, BeforeValidator(_number), Field(gt=0, lt=1)] = Field(
+        0.95, description="prior probability of 1/within <= k <= within")
+    dof: Optional[Positive] = Field(None, description="inverse-chi2 only, instead of `within`: the stated sigma "
+                                                      "is worth this many readings")
+
+    @field_validator("within")
+    @classmethod
+    def _above_one(cls, v):
+        if v is not None and not v > 1:
+            raise ValueError(f"expected a factor greater than 1 (within: 1 would say the stated sigma is exact: "
+                             f"give the instruments scale: known), found {number_text(v)}")
+        return v
+
+    @model_validator(mode="after")
+    def _one_width(self):
+        if self.dof is not None and self.shape != "inverse-chi2":
+            raise ValueError("expected 'within' for a lognormal prior ('dof' is for shape: inverse-chi2), found dof")
+        if (self.within is None) == (self.dof is None):
+            raise ValueError("expected the prior's width as 'within' (a factor above 1)"
+                             + (" or 'dof'" if self.shape == "inverse-chi2" else "")
+                             + (", found both" if self.within is not None else ", found neither"))
+        return self
+
+
+class ErrorScale(Strict):
+    """How well the stated sigma of some instruments is known (eqn 10: C_x,i = k^2 x the stated
+    C_x,i). The listed instruments share one factor k; instruments not listed keep their stated sigma
+    (k = 1). 'estimate' identifies k with the parameters (maximum likelihood of the full support
+    function, eqn 5, with the restricted correction for the parameters' degrees of freedom);
+    with a `prior`, k is estimated with that prior."""
+
+    name: Optional[str] = Field(None, pattern=_NAME,
+                                description="name of the group in reports (default: its instruments' names)")
+    instruments: list[Annotated[str, Field(pattern=_NAME)]] = Field(
+        min_length=1, description="names of the instruments sharing the factor k")
+    scale: Literal["known", "estimate"] = Field(
+        "estimate", description="'estimate': the stated sigma is right up to a factor k, estimated with the "
+                                "parameters; 'known': k = 1 (the default for instruments not listed)")
+    prior: Optional[ScalePrior] = Field(None, description="prior on k (scale: estimate only)")
+
+    @model_validator(mode="after")
+    def _prior_needs_estimate(self):
+        if self.prior is not None and self.scale == "known":
+            raise ValueError("expected no prior for a known scale (scale: estimate to give k a prior), found a prior")
+        return self
+
+
+class Parameter(Strict):
+    """A quantity to identify: 'E[layer]', 'nu[layer]', 'K0', 'K0[layer]', 'B[instrument]', ..."""
+
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*(\[[A-Za-z0-9_\-.]+\])?$")
+    initial: Stress
+    bounds: Optional[tuple[Stress, Stress]] = None
+    log: Annotated[bool, BeforeValidator(_flag)] = Field(False, description="iterate on log(p) (positive parameters)")
+    prior: Optional[Prior] = None
+
+
+class FitSettings(Strict):
+    method: Literal["lm", "gn", "lm-scaled"] = "lm"
+    max_iterations: Count = Field(30, gt=0)
+    mu0: Positive = 10.0
+    step_tol: Positive = 1e-6
+    objective_tol: Positive = 1e-10
+    weighting: Literal["full", "diagonal", "identity"] = Field(
+        "full", description="C_x used in J: the instruments' full covariance (eqn 9), its diagonal, or I (eqn 8)")
+    mesh_error: Literal["check", "include", "ignore"] = Field(
+        "check", description="discretisation error of the readings, from one run at the estimate on a mesh twice as "
+                             "fine: 'check' reports it against each reading's sigma (a warning above 0.3 sigma); "
+                             "'include' adds it to C_x and fits again; 'ignore' skips the check")
+
+
+class Lining(Strict):
+    """An elastic lining: a ring of its real thickness inside the excavated boundary (meshed with
+    `layers` quadratic elements through the thickness), installed stress-free at a stage."""
+
+    name: str = Field("lining", pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$",
+                      description="name of the lining (its parameters are E[name] and nu[name])")
+    thickness: Positive = Field(description="thickness of the lining [m]; its outer face is the excavated wall")
+    E: Stress = Field(gt=0, description="Young's modulus of the lining [kPa] (or '30 GPa')")
+    nu: Num = Field(ge=0.0, lt=0.5, description="Poisson's ratio of the lining, 0 <= nu < 0.5")
+    layers: Annotated[int, BeforeValidator(_whole), Field(ge=1, le=8)] = Field(
+        2, description="quadratic elements through the lining's thickness (bending needs at least 2)")
+
+
+class Stage(Strict):
+    """One construction step. In a stage the lining named by `install` is placed first (stress-free,
+    on the wall as it has moved so far), then the in-situ stress on the tunnel wall is released up to
+    the cumulative fraction `release`."""
+
+    name: StageName = Field(description="stage name (readings are tagged with it)")
+    release: Optional[Annotated[float, BeforeValidator(_number), Field(gt=0.0, le=1.0)]] = Field(
+        None, description="cumulative fraction of the in-situ stress on the tunnel wall released by the end of "
+                          "this stage (beta_k, 0 < beta <= 1, increasing from stage to stage)")
+    install: Optional[str] = Field(None, description="name of the lining installed at the start of this stage")
+
+
+class Construction(Strict):
+    """Staged construction (convergence-confinement): stress released in steps, a lining between them."""
+
+    lining: Optional[Lining] = Field(None, description="the lining (installed by a stage's 'install')")
+    stages: list[Stage] = Field(min_length=1, description="construction stages in order")
+
+
+class _Forecast(Strict):
+    name: str = Field(pattern=NAME, description="unique forecast name (files and figures use it)")
+    stage: Optional[StageName] = Field(None, description="construction stage the forecast is for (default: the last)")
+    alert: Optional[Positive] = Field(
+        None, description="alert level of the forecast quantity's magnitude, in its unit (m, kN/m, kNm/m): the "
+                          "probability that it is exceeded is reported")
+
+
+class PointsForecast(_Forecast):
+    """Displacement components at listed points (a building, a utility)."""
+
+    kind: Literal["points"]
+    points: list[Point] = Field(min_length=1, description="[x, y] of each point [m]")
+    components: list[Literal["ux", "uy"]] = Field(["uy"], min_length=1)
+
+
+class LineForecast(_Forecast):
+    """A displacement component at evenly spaced points of a straight line (a settlement trough)."""
+
+    kind: Literal["line"]
+    start: Point = Field(description="first point [x, y] [m]")
+    end: Point = Field(description="last point [x, y] [m]")
+    points: Annotated[int, BeforeValidator(_whole), Field(ge=2, le=2000)] = Field(
+        41, description="number of evenly spaced points from start to end")
+    component: Literal["ux", "uy"] = Field("uy", description="displacement component (uy: up positive)")
+
+
+class ChordForecast(_Forecast):
+    """Change of length of a chord between two points (convergence; shortening negative)."""
+
+    kind: Literal["convergence"]
+    points: tuple[Point, Point]
+
+
+class InstrumentForecast(_Forecast):
+    """What an instrument of the case will read at `stage` (its readings convention; integration
+    constants of a future survey not included)."""
+
+    kind: Literal["instrument"]
+    instrument: str = Field(pattern=NAME, description="name of an instrument of the case")
+
+
+class LiningForecast(_Forecast):
+    """Section forces around the lining (thrust N [kN/m], bending moment M [kNm/m], shear V [kN/m])."""
+
+    kind: Literal["lining"]
+    quantities: list[Literal["N", "M", "V"]] = Field(["N", "M"], min_length=1)
+
+
+Forecast = Annotated[Union[PointsForecast, LineForecast, ChordForecast, InstrumentForecast, LiningForecast],
+                     Field(discriminator="kind")]
+
+
+class _Candidate(Strict):
+    """An instrument that could be installed: defined as in `instruments` (without readings), read at
+    `read_at`; `vary` makes one candidate per value of one of its fields (e.g. {x: [3, 6, 9]})."""
+
+    read_at: Optional[StageName] = Field(None, description="stage the candidate would be read at (default: the "
+                                                           "last stage with readings)")
+    vary: Optional[dict[str, list[Any]]] = Field(
+        None, description="one field and its values, one candidate per value (e.g. {x: [3, 6, 9, 12]})")
+
+
+class PointsCandidate(PointsInstrument, _Candidate):
+    pass
+
+
+class InclinometerCandidate(Inclinometer, _Candidate):
+    pass
+
+
+class SlidingMicrometerCandidate(SlidingMicrometer, _Candidate):
+    pass
+
+
+class DeflectometerCandidate(Deflectometer, _Candidate):
+    pass
+
+
+class ConvergenceCandidate(Convergence, _Candidate):
+    pass
+
+
+Candidate = Annotated[Union[PointsCandidate, InclinometerCandidate, SlidingMicrometerCandidate,
+                            DeflectometerCandidate, ConvergenceCandidate], Field(discriminator="kind")]
+
+
+class Design(Strict):
+    """`geoback design`: which candidate instrument would narrow the forecasts (or C_p) most."""
+
+    objective: Optional[Literal["forecasts", "parameters"]] = Field(
+        None, description="'forecasts': the variance of the target forecasts; 'parameters': ln det C_p (default: "
+                          "forecasts if the case has any)")
+    forecasts: Optional[list[Annotated[str, Field(pattern=NAME)]]] = Field(
+        None, description="names of the forecasts to narrow (default: all)")
+    candidates: list[Candidate] = Field(min_length=1, description="candidate instruments")
+
+
+class Output(Strict):
+    dir: Optional[str] = Field(None, description="results directory (default results/<name>)")
+    vtu: Annotated[bool, BeforeValidator(_flag)] = True
+
+
+class Case(Strict):
+    name: str = Field(pattern=r"^[A-Za-z0-9_\-.]+$")
+    description: str = ""
+    geometry: Geometry
+    ground: Ground
+    mesh: MeshSettings = MeshSettings()
+    instruments: list[Instrument] = Field(default_factory=list)
+    construction: Optional[Construction] = Field(
+        None, description="construction stages (release fractions, a lining); default: one excavation step")
+    error_scales: list[ErrorScale] = Field(
+        default_factory=list, description="instruments whose stated sigma is known only up to a factor "
+                                          "(estimated with the parameters); the others' sigma is taken as exact")
+    parameters: list[Parameter] = Field(default_factory=list)
+    fit: FitSettings = FitSettings()
+    forecasts: list[Forecast] = Field(
+        default_factory=list, description="quantities to forecast at the estimate with their 95 % band (points, "
+                                          "lines, chords, an instrument's next readings, the lining's forces)")
+    design: Optional[Design] = Field(None, description="candidate instruments for `geoback design`")
+    output: Output = Output()

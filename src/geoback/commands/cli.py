@@ -1,0 +1,431 @@
+"""Command line: a thin layer that parses, calls the library and prints."""
+from __future__ import annotations
+
+import json
+import os
+import sys
+from functools import wraps
+from pathlib import Path
+from typing import Optional
+
+# Dense linear algebra here is small (readings x parameters): BLAS threads cost more than they
+# give. Set before numpy loads; MKL's threads (PARDISO) are not affected.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import typer  # noqa: E402
+
+from geoback.errors import GeobackError  # noqa: E402
+
+app = typer.Typer(add_completion=False, pretty_exceptions_enable=False, no_args_is_help=True, rich_markup_mode=None,
+                  help="Maximum-likelihood back-analysis of tunnel and excavation instrumentation.")
+
+
+def _err(message: str) -> None:
+    typer.echo(f"error: {message}", err=True)
+
+
+def friendly(func):
+    """Answer user mistakes with one clear line and exit code 2, never a traceback."""
+
+    @wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except GeobackError as exc:
+            _err(str(exc))
+            raise typer.Exit(exc.exit_code) from None
+        except (ValueError, OSError) as exc:
+            if os.environ.get("GEOBACK_DEBUG"):
+                raise
+            _err(str(exc))
+            raise typer.Exit(2) from None
+        except KeyboardInterrupt:
+            from geoback.reports.resultsets import interrupted_note
+
+            _err(f"interrupted; {interrupted_note()}")
+            raise typer.Exit(130) from None
+
+    return wrapper
+
+
+def _say(message: str) -> None:
+    """Progress on stderr, printed verbatim (names such as E[clay] are never read as markup)."""
+    typer.echo(f"  {message}", err=True)
+
+
+ALLOW_LARGE_HELP = ("accept a mesh estimated beyond the default limit of 500,000 DOFs (about 1.8 GB and a "
+                    "minute for `run`; GEOBACK_MAX_DOFS changes the limit)")
+
+
+def _allow_large():
+    return typer.Option(False, "--allow-large", help=ALLOW_LARGE_HELP)
+
+
+def _load(case: Path, allow_large: bool = False):
+    from geoback.case.loading import load_case
+
+    return load_case(case, allow_large=allow_large)
+
+
+OUT_HELP = ("output folder (default results/<name>); this command's previous results there are replaced "
+            "as a whole, other files kept")
+
+
+def _check_out(out: Optional[str], option: str = "--out", **kwargs) -> Optional[Path]:
+    """--out refused before any work when it cannot take results (a file, '', not writable, ...)."""
+    from geoback.reports.resultsets import check_out
+
+    return check_out(out, option, **kwargs)
+
+
+def _out_dir(loaded, out: Optional[Path]) -> Path:
+    """The results folder: --out (checked already), else the case's output.dir, else
+    results/<name> (checked here, before any meshing)."""
+    if out is not None:
+        return out
+    if loaded.case.output.dir:
+        return _check_out(str(loaded.folder / loaded.case.output.dir), "output.dir of the case")
+    return _check_out(str(Path("results") / loaded.case.name), "the results folder")
+
+
+@app.command()
+@friendly
+def validate(case: Path = typer.Argument(..., help="case file (YAML)"), allow_large: bool = _allow_large()):
+    """Check a case file: schema, physics, mesh size, instruments, readings and parameters; list every problem."""
+    from geoback.errors import CaseError
+
+    try:
+        loaded = _load(case, allow_large)  # schema errors first: no heavy imports before them
+    except CaseError as exc:
+        if len(exc.problems) > 1:
+            for problem in exc.problems:
+                _err(str(problem))
+            raise typer.Exit(exc.exit_code) from None
+        raise
+    from geoback.commands.validation import check_case
+
+    typer.echo(check_case(loaded))
+
+
+@app.command()
+@friendly
+def schema():
+    """Print the JSON Schema of case files (for editors)."""
+    from geoback.case.loading import case_schema
+
+    typer.echo(json.dumps(case_schema(), indent=2))
+
+
+@app.command()
+@friendly
+def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
+         out: Optional[str] = typer.Option(None, help=OUT_HELP),
+         allow_large: bool = _allow_large()):
+    """Mesh the case with gmsh; write mesh.msh and mesh.vtu."""
+    out = _check_out(out)
+    from geoback.physics.mesh import build_mesh
+    from geoback.reports.fields import write_mesh
+    from geoback.reports.resultsets import result_set
+
+    loaded = _load(case, allow_large)
+    folder = _out_dir(loaded, out)
+    m = build_mesh(loaded.case, allow_large=allow_large)
+    with result_set(folder, "mesh") as staging:
+        write_mesh(m, staging / "mesh.msh")
+        write_mesh(m, staging / "mesh.vtu")
+    typer.echo(f"{len(m.triangles)} elements, {len(m.nodes)} nodes ({2 * len(m.nodes)} dofs) -> {folder}/mesh.msh, mesh.vtu")
+
+
+@app.command()
+@friendly
+def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
+             out: Optional[str] = typer.Option(None, help=OUT_HELP),
+             vtu: bool = typer.Option(True, help="write the displacement/stress field as field.vtu"),
+             set_: list[str] = typer.Option([], "--set", help="NAME=VALUE with the case's names and units (repeatable): "
+                                            "E[clay]=12 MPa, Egrad[clay]=400, n[clay]=1.5, K0grad=0.05, beta=0.7, "
+                                            "B[I1]=4 mm, zsplit[clay]=15 with Esplit[clay]=25 MPa; an inclinometer's bias "
+                                            "shift bias[I1]=0.2 mrad or depth offset zoff[I1]=300 mm"),
+             refine: Optional[float] = typer.Option(None, help="mesh this many times finer than the case says "
+                                                    "(default 2 for study data, 1 for a forward run)"),
+             noise: bool = typer.Option(False, "--noise", help="add noise drawn from each instrument's C_x"),
+             seed: int = typer.Option(0, help="seed of the noise"),
+             readings_out: Optional[str] = typer.Option(None, help="write study data: readings as a CSV usable as "
+                                                        "readings_file (a finer mesh than the case's by default)"),
+             allow_large: bool = _allow_large()):
+    """Forward run: predicted readings and the field; or study data (--readings-out, --noise)."""
+    out = _check_out(out)
+    readings_out = _check_out(readings_out, "--readings-out", single_file=True)
+    from geoback.inference.identification import prepare
+    from geoback.commands.simulate import simulate as run_simulation, write_readings_csv
+    from geoback.inference.synthetic import synthetic_readings
+
+    loaded = _load(case, allow_large)
+    assignments = {}
+    for item in set_:
+        name, eq, value = item.partition("=")
+        if not eq or not name.strip() or not value.strip():
+            raise GeobackError(f"--set expects NAME=VALUE (e.g. --set \"E[clay]=12 MPa\"), found '{item}'")
+        assignments[name.strip()] = value.strip()
+    if readings_out is not None or noise:
+        factor = 2.0 if refine is None else refine
+        if factor < 1:
+            raise GeobackError(f"--refine must be at least 1 (a mesh finer than the case's), found {factor:g}")
+        if readings_out is None:
+            _out_dir(loaded, out)
+        staged = loaded.case.construction is not None
+        readings = synthetic_readings(loaded, factor, assignments, noise_seed=seed if noise else None,
+                                      by_stage=staged)
+        target = readings_out or _out_dir(loaded, out) / "readings.csv"
+        used = ", ".join(f"{k} = {v}" for k, v in assignments.items()) or "the case's values"
+        mesh = "the case's mesh (inverse crime: fitting these readings on it proves little)" if factor == 1 else \
+            f"a mesh {factor:g} times finer than the case's"
+        notes = [f"geoback simulate {case.name}: {used}; {mesh}" + (f"; noise from each C_x, seed {seed}" if noise
+                                                                    else "; no noise")]
+        write_readings_csv(loaded, readings, target, notes)
+        count = sum(len(v) for sets in readings.values() for v in (sets.values() if staged else [sets]))
+        typer.echo(f"{count} readings ({used}; {mesh}"
+                   f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
+        return
+    if refine not in (None, 1.0):
+        raise GeobackError("--refine applies to study data (--readings-out or --noise)")
+    folder = _out_dir(loaded, out)
+    analysis = prepare(loaded, parameters=[], with_readings=False)
+    from geoback.inference.parameters import resolve_values
+
+    values = {**analysis.values, **resolve_values(analysis.simulation, assignments)}
+    res = run_simulation(analysis, folder, values=values, vtu=vtu and loaded.case.output.vtu)
+    used = ", ".join(f"{k} = {v}" for k, v in assignments.items())
+    typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs"
+               f"{' with ' + used if used else ''} -> {folder}/predicted.csv"
+               + (", lining.csv, lining.png" if res.get("lining") is not None else ""))
+
+
+@app.command()
+@friendly
+def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
+             out: Optional[str] = typer.Option(None, help=OUT_HELP),
+             alpha: float = typer.Option(0.05, help="significance level of the adequacy and hypothesis tests"),
+             plots: bool = typer.Option(True, help="write the before/after figure"),
+             quiet: bool = typer.Option(False, "--quiet", "-q"),
+             allow_large: bool = _allow_large()):
+    """Is the model adequate? If not: where is the mismatch, what physics is missing, how much better it fits."""
+    from geoback.diagnosis import diagnose as run_diagnosis
+    from geoback.reports.diagnosis_report import diagnosis_text, write_diagnosis
+    from geoback.reports.diagnosis_report import verdict
+    from geoback.inference.explore import explore
+
+    out = _check_out(out)
+    loaded = _load(case, allow_large)
+    folder = _out_dir(loaded, out)
+    say = None if quiet else _say
+    d = run_diagnosis(loaded, alpha=alpha, progress=say)
+    exploration = explore(d.final_misfit, d.final, ("profiles",)) if plots else None
+    write_diagnosis(d, folder, plots=plots, exploration=exploration)
+    if not quiet:
+        typer.echo(diagnosis_text(d))
+    else:
+        typer.echo(verdict(d))
+    typer.echo(f"-> {folder}/diagnosis.md, diagnosis.json", err=True)
+
+
+EXIT_CODES = """Exit codes: 0 converged (warnings, if any, are printed); 1 the fit did not converge or did not
+move from the initial values; 2 the input was refused (the message names file, line and field);
+3 with --strict: converged, but with warnings; 130 interrupted."""
+
+
+@app.command(epilog=EXIT_CODES)
+@friendly
+def run(case: Path = typer.Argument(..., help="case file (YAML)"),
+        out: Optional[str] = typer.Option(None, help=OUT_HELP),
+        method: Optional[str] = typer.Option(None, help="lm, lm-scaled or gn (default: the case's fit.method)"),
+        plots: bool = typer.Option(False, "--plots", help="also write figures (PNG and SVG)"),
+        profile: bool = typer.Option(False, "--profile", help="profile-likelihood intervals for every parameter "
+                                     "(by default only where the linearised interval is unreliable)"),
+        strict: bool = typer.Option(False, "--strict", help="exit 3 if the result carries any warning (for CI)"),
+        quiet: bool = typer.Option(False, "--quiet", "-q", help="print only the final line"),
+        as_json: bool = typer.Option(False, "--json", help="print summary.json to stdout"),
+        allow_large: bool = _allow_large()):
+    """Identify the case's parameters by maximum likelihood and write all results."""
+    if method is not None and method not in ("lm", "lm-scaled", "gn"):
+        raise GeobackError(f"--method must be lm, lm-scaled or gn, not '{method}'")
+    out = _check_out(out)
+    loaded = _load(case, allow_large)  # schema errors first: no heavy imports before them
+    folder = _out_dir(loaded, out)
+    from geoback.reports.report import report_text, summary
+    from geoback.commands.run import run_case
+
+    names: list[str] = []
+    talk = not quiet and not as_json
+
+    def progress(it):
+        if talk:
+            vals = "  ".join(f"{n} = {v:.6g}" for n, v in zip(names, it.p))
+            mark = ("accepted" if it.accepted else "rejected" if it.J < float("inf")
+                    else "rejected (the model has no solution there)")
+            _say(f"iteration {it.k:2d}  mu = {it.mu:8.2g}  J = {it.J:<12.6g} {mark}  {vals}")
+
+    def named(analysis):
+        names[:] = analysis.parameters.names
+
+    res = run_case(loaded, folder, method=method, progress=progress, plots=plots, say=_say if talk else None,
+                   prepared=named, profile="all" if profile else "auto")
+    if as_json:
+        typer.echo(json.dumps(json.loads((folder / "summary.json").read_text())))
+    elif not quiet:
+        typer.echo(report_text(res))
+    s = summary(res)
+    estimates = ", ".join(f"{n} = {v['estimate']:.6g} +/- {v['std']:.3g}" for n, v in s["parameters"].items())
+    warned = f"; {len(res.caveats)} warning(s): {', '.join(sorted({c.code for c in res.caveats}))}" \
+        if res.caveats else ""
+    typer.echo(f"{res.status}: {estimates} ({s['iterations']} iterations, {s['factorisations']} "
+               f"factorisation(s){warned}) -> {folder}", err=as_json)
+    if res.fit.status != "converged" or not res.fit.moved:
+        raise typer.Exit(1)
+    if strict and res.caveats:
+        raise typer.Exit(3)
+
+
+@app.command()
+@friendly
+def design(case: Path = typer.Argument(..., help="case file (YAML) with a design section"),
+           out: Optional[str] = typer.Option(None, help=OUT_HELP),
+           plots: bool = typer.Option(True, help="write the figure (design.png, design.svg)"),
+           separate: bool = typer.Option(False, "--separate", help="also rank the candidates by their power to "
+                                         "tell apart the two hypotheses `geoback diagnose` finds leading "
+                                         "(runs the diagnosis first)"),
+           allow_large: bool = _allow_large()):
+    """Rank candidate instruments by how much they would narrow the forecasts (or the parameters)."""
+    out = _check_out(out)
+    loaded = _load(case, allow_large)
+    if loaded.case.design is None:
+        raise loaded.error(("design",), "expected a design section with candidate instruments (see `geoback "
+                                        "init`), found none")
+    folder = _out_dir(loaded, out)
+    from geoback.worth.design import design as rank
+    from geoback.reports.design_report import design_text, write_design
+    from geoback.inference.identification import identify, prepare
+
+    analysis = prepare(loaded)
+    _say("identifying the parameters at which the candidates are compared")
+    res = identify(analysis)
+    if res.fit.status != "converged" or not res.fit.moved:
+        raise GeobackError(f"the identification did not converge ({res.status}): candidates are compared at the "
+                           "estimate; run `geoback run` and fix the case first")
+    d = rank(analysis, res, progress=_say)
+    if separate:
+        from geoback.worth.design import separate as discriminate
+
+        _say("diagnosing: which hypotheses explain the readings best")
+        d = discriminate(analysis, d, progress=_say)
+    write_design(d, folder, loaded.case.name, plots=plots)
+    typer.echo(design_text(d, loaded.case.name))
+    typer.echo(f"best: {d.best} ({100 * d.reduction[d.ranking[0]]:.0f} % narrower) -> {folder}/design.md")
+    D = d.discrimination
+    if D is not None and not D.found:
+        typer.echo("diagnose refitted no hypothesis: nothing to tell apart")
+    elif D is not None and D.separation.max() > 1e-9:
+        k = int(D.separation.argmax())
+        typer.echo(f"best to tell {D.a} from {D.b}: {D.names[k]} (power {D.power[k]:.2f})")
+
+
+@app.command()
+@friendly
+def covariance(case: Optional[Path] = typer.Argument(None, help="case file: print an instrument's C_x"),
+               name: Optional[str] = typer.Option(None, "--name", help="instrument name in the case"),
+               instrument: Optional[str] = typer.Option(None, help="inclinometer, sliding-micrometer (extensometer) or deflectometer"),
+               stations: Optional[int] = typer.Option(None, help="number of stations"),
+               spacing: Optional[float] = typer.Option(None, help="equal station spacing [m]"),
+               lengths: Optional[str] = typer.Option(None, help="station lengths l1,l2,... from the reference end [m]"),
+               sigma: Optional[float] = typer.Option(None, help="std of one primary reading"),
+               var_a: float = typer.Option(0.0, help="variance of A (sliding micrometer)"),
+               var_b: float = typer.Option(0.0, help="variance of B (inclinometer)"),
+               var_c: float = typer.Option(0.0, help="variance of C (deflectometer)"),
+               var_d: float = typer.Option(0.0, help="variance of D (deflectometer)"),
+               fmt: str = typer.Option("table", "--format", help="table, csv or json"),
+               header: bool = typer.Option(False, help="with --format csv: one header row of labels")):
+    """Print a measurement covariance matrix C_x (eqns 10-20), in station order from the reference end."""
+    from geoback.case import covariance as cov
+
+    if fmt not in ("table", "csv", "json"):
+        raise GeobackError(f"--format must be table, csv or json, not '{fmt}'")
+    if case is not None:
+        if not name:
+            raise GeobackError("give --name INSTRUMENT to choose an instrument of the case")
+        from geoback.observation.instruments import build_block
+
+        loaded = _load(case)
+        idx = next((i for i, ins in enumerate(loaded.case.instruments) if ins.name == name), None)
+        if idx is None:
+            raise GeobackError(f"{case}: no instrument named '{name}' "
+                               f"(instruments: {', '.join(i.name for i in loaded.case.instruments)})")
+        block = build_block(loaded.case.instruments[idx], loaded, idx)
+        labels = [f"{lab.component}{lab.station}" for lab in block.labels]
+        typer.echo(cov.render_matrix(block.covariance, fmt, header=header or fmt != "csv", labels=labels))
+        return
+    if instrument is None or sigma is None:
+        raise GeobackError("give a case file with --name, or --instrument KIND with --sigma and the stations")
+    kind = cov.normalise_kind(instrument)
+    ls = None
+    if lengths is not None:
+        try:
+            ls = [float(v) for v in lengths.split(",") if v.strip()]
+        except ValueError:
+            raise GeobackError(f"--lengths must be numbers separated by commas, found '{lengths}'") from None
+        if stations is not None and stations != len(ls):
+            raise GeobackError(f"--stations {stations} but --lengths gives {len(ls)} lengths")
+        stations = None
+    ls = cov.station_lengths(stations=stations, spacing=spacing, lengths=ls)
+    variances = {"sliding_micrometer": {"A": var_a}, "inclinometer": {"B": var_b},
+                 "deflectometer": {"C": var_c, "D": var_d}}[kind]
+    C = cov.instrument_covariance(kind, ls, sigma, variances)
+    typer.echo(cov.render_matrix(C, fmt, header=header or fmt != "csv"))
+
+
+@app.command()
+@friendly
+def batch(targets: list[str] = typer.Argument(..., help="folders (every *.yaml in them, recursively), "
+                                              "glob patterns ('cases/*.yaml') or case files"),
+          workers: Optional[int] = typer.Option(None, help="local worker processes (default min(2, CPUs); unused with --scheduler)"),
+          scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address (tcp://host:8786) "
+                                                  "instead of local processes"),
+          out: str = typer.Option("results/batch", help="output folder: summary.csv and <case name>/"),
+          allow_large: bool = _allow_large()):
+    """Identify many cases in parallel; write summary.csv and each case's results. Exit 1 if any failed."""
+    out = _check_out(out, replaced=False)
+    from geoback.commands.batch import failed, run_batch
+
+    def progress(row):
+        extra = f": {row['message']}" if row["message"] else ""
+        typer.echo(f"  {row['case']} ({row['file']}): {row['status']}{extra}", err=True)
+
+    try:
+        rows = run_batch(targets, out, workers=workers, scheduler=scheduler, progress=progress,
+                         allow_large=allow_large)
+    except KeyboardInterrupt:
+        _err(f"interrupted; each case's folder in {out} holds its previous or its new complete results; "
+             f"{out / 'summary.csv'} was not updated")
+        raise typer.Exit(130) from None
+    bad = failed(rows)
+    typer.echo(f"{len(rows) - len(bad)} of {len(rows)} case(s) converged -> {out / 'summary.csv'}")
+    if bad:
+        typer.echo("failed: " + ", ".join(f"{row['file']} ({row['status']})" for row in bad), err=True)
+        raise typer.Exit(1)
+
+
+@app.command()
+@friendly
+def init(path: Path = typer.Argument(Path("case.yaml"), help="file to write (default case.yaml)"),
+         force: bool = typer.Option(False, "--force", help="overwrite an existing file")):
+    """Write a commented template case (units and meaning of every field) that runs as it is."""
+    from geoback.commands.template import write_template
+
+    written = write_template(path, force=force)
+    typer.echo(f"wrote {written}: check it with `geoback validate {written}`, fit it with `geoback run {written}`")
+
+
+def main() -> None:  # pragma: no cover
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,46 @@
+"""`geoback run`: prepare, identify, explore what the outputs need, write every file of one case."""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+from geoback.case.loading import LoadedCase
+from geoback.inference.identification import Identification, identify, prepare
+from geoback.case.strength import is_plastic
+
+
+def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=None, vtu: bool | None = None,
+             plots: bool = False, say=None, prepared=None, profile: str = "auto") -> Identification:
+    """identify() the case, explore what the field file and figures need, write all outputs to `out`.
+
+    progress(iteration) follows the fit; say(text) the steps after it; prepared(analysis) is
+    called once the case is meshed and read, before the fit."""
+    from geoback.inference.explore import explore
+    from geoback.reports.report import write_run
+
+    analysis = prepare(loaded)
+    if prepared is not None:
+        prepared(analysis)
+    res = identify(analysis, method=method, progress=progress, profile=profile, mesh_error=None)
+    if loaded.case.forecasts and res.fit.moved:
+        from geoback.worth.forecast import forecast
+        from geoback.reports.forecast_report import forecast_caveats
+
+        if say is not None:
+            say(f"forecasts: {', '.join(f.name for f in loaded.case.forecasts)}")
+        fc = forecast(analysis, res, progress=say)
+        res = replace(res, forecasts=fc, caveats=tuple(res.caveats) + tuple(forecast_caveats(fc)))
+    vtu = loaded.case.output.vtu if vtu is None else vtu
+    what = ("field",) if vtu else ()
+    construction = loaded.case.construction
+    if construction is not None and construction.lining is not None:
+        what += ("lining",)  # thrust and moments around the lining: lining.csv, lining.vtu, the figure
+    if is_plastic(loaded.case):
+        what += ("plastic_zone",)  # the yielded ground: plastic_zone.csv, report section, the figure
+    if plots:
+        from geoback.reports.plots import exploration_for
+
+        what = tuple(sorted(set(what) | set(exploration_for())))
+    exploration = explore(analysis.misfit, res, what, analysis.settings, progress=say) if what else None
+    write_run(res, Path(out), exploration, plots=plots)
+    return res

@@ -1,0 +1,43 @@
+"""`geoback validate` after the schema and physics: instruments, readings and parameters checked by
+building the forward problem, within a few seconds and a few hundred MB whatever the mesh.
+
+A mesh estimated at most ``VALIDATE_MESH_DOFS`` is built as it will be used: gmsh runs on the real sizes and the
+finite-element model is assembled. A larger mesh is not (building it would take
+longer than validate may: up to a minute and 2 GB at the default size limit,
+``geoback.case.meshsize.DEFAULT_MAX_DOFS``):
+the same checks then run on a coarse stand-in mesh of the same geometry (the checks of
+instruments, readings and parameters are geometric and do not depend on the element size), and
+the result says so.
+"""
+from __future__ import annotations
+
+from geoback.case.loading import LoadedCase, MeshSettings
+
+VALIDATE_MESH_DOFS = 50_000  # measured cold (gmsh included): 33 k DOFs 2.2 s 260 MB, 73 k DOFs 4.7 s 440 MB
+
+
+def stand_in_case(case):
+    """The case with the default (coarse) mesh sizes: same geometry, layers and element order."""
+    return case.model_copy(update={"mesh": MeshSettings(order=case.mesh.order, growth=max(case.mesh.growth, 0.25))})
+
+
+def check_case(loaded: LoadedCase) -> str:
+    """Build what `run` builds (or its coarse stand-in); return the one-line verdict. Raises
+    GeobackError (located when it is the case's fault) at the first problem found."""
+    from geoback.inference.identification import prepare
+    from geoback.case.meshsize import mesh_inputs
+    from geoback.case.meshsize import estimate
+
+    case = loaded.case
+    est = estimate(mesh_inputs(case))
+    name = loaded.path if loaded.path is not None else case.name
+    if est.dofs <= VALIDATE_MESH_DOFS:
+        analysis = prepare(loaded)
+        mesh_text = f"{analysis.simulation.dofs} dofs"
+    else:
+        analysis = prepare(loaded.with_case(stand_in_case(case)))
+        mesh_text = (f"mesh {est.describe()} to run, not built by validate: instruments, readings and "
+                     f"parameters checked on a coarser mesh of the same geometry")
+    warned = "".join(f"\nwarning: [{c.code}] {c.message}" for c in analysis.notices)
+    return (f"{name}: valid ({len(case.instruments)} instruments, {analysis.simulation.survey.m} readings, "
+            f"{len(case.parameters)} parameters, {mesh_text}){warned}")

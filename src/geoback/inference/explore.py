@@ -1,0 +1,241 @@
+"""The exploration step: what figures and field files need beyond the fit, computed on request.
+
+``explore(misfit, result)`` runs the model where the identification did not: the objective on
+a slice through the estimate (paper Fig. 2), the other method's iteration path (Figs. 3-4), the
+field at the estimate and the model along each instrument. Its work is counted on its own, so a
+run's summary reports the identification only; figures and writers read the result and the
+exploration and never run the model.
+
+The objective slice costs one forward run per grid point; when every point needs its own
+factorisation (several moduli or nu vary) the grid is sized to a time budget measured on a probe,
+and said so in the figure.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field as _field
+
+import numpy as np
+
+from geoback.inference.estimate import Fit, Settings, fit
+from geoback.inference.identification import Identification
+from geoback.inference.misfit import Misfit
+from geoback.physics.simulation import Field
+
+GRID = 40  # grid points per axis when one factorisation serves the whole grid
+GRID_MIN = 9
+LINE_POINTS = 160  # model values along a linewise instrument
+WHAT = ("slice", "other", "field", "profiles", "lining", "plastic_zone")
+
+
+@dataclass(frozen=True)
+class ObjectiveSlice:
+    """J on a grid of two parameters (indices i, j) through the estimate, the others held there;
+    with one parameter, j is None and J is a curve over `a`."""
+
+    i: int
+    j: int | None
+    a: np.ndarray
+    b: np.ndarray | None
+    J: np.ndarray
+    refactorises: bool  # every grid point needed its own factorisation (grid sized to the budget)
+    directions: np.ndarray | None = None  # (n, 2) SVD directions of the slice at the estimate
+    singular_values: np.ndarray | None = None
+    whole_svd: bool = True  # directions are those of the whole problem (n = 2)
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A linewise instrument: points along it from its reference end and the model's displacement
+    in the measured direction there; and every instrument's displacement at its stations and
+    along its line (for the deformed-field figure)."""
+
+    along: np.ndarray | None  # arc length [m] of the dense points (linewise only)
+    line: np.ndarray | None  # (k, 2) dense points
+    line_displacement: np.ndarray | None  # (k, 2)
+    line_reading: np.ndarray | None  # (k,) what the instrument would read there (relative to its
+    # reference end for a relative instrument), without integration constants
+    station_displacement: np.ndarray  # (npts, 2) at the stations
+    stage_readings: dict = _field(default_factory=dict)  # stage -> line_reading after that stage, for an
+    # instrument read at several construction stages (the attributes above are at the last of them)
+
+
+@dataclass(frozen=True)
+class Exploration:
+    other: Fit | None = None
+    other_note: str = ""
+    slice: ObjectiveSlice | None = None
+    field: Field | None = None
+    profiles: dict = _field(default_factory=dict)
+    lining: object | None = None  # lining.LiningForces at the estimate (models with a lining)
+    plastic_zone: object | None = None  # plastic_zone.PlasticZone at the estimate (ground that can yield)
+    counts: dict = _field(default_factory=dict)
+    seconds: float = 0.0
+
+
+def other_method(method: str) -> str:
+    return "lm" if method == "gn" else "gn"
+
+
+def pick_pair(result: Identification) -> tuple[int, int | None]:
+    """The two most correlated parameters (the pair itself for n = 2; j None for n = 1)."""
+    n = result.parameters.n
+    if n == 1:
+        return 0, None
+    if n == 2:
+        return 0, 1
+    C = np.abs(np.nan_to_num(result.reliability.correlation, nan=0.0))
+    np.fill_diagonal(C, -1)
+    i, j = np.unravel_index(np.argmax(C), C.shape)
+    return int(min(i, j)), int(max(i, j))
+
+
+def _range(result: Identification, paths: list[Fit], i: int, pad_min: float) -> tuple[float, float]:
+    """Grid range of parameter i: both paths and the estimate, padded, inside the bounds."""
+    p_hat = result.fit.p
+    params = result.parameters
+    pts = np.array([h.p[i] for f in paths for h in f.history if h.accepted] + [p_hat[i]])
+    span = max(pts.max() - pts.min(), 0.1 * max(abs(p_hat[i]), 1e-12))
+    lo, hi = pts.min() - 0.12 * span, pts.max() + 0.12 * span
+    lo, hi = min(lo, p_hat[i] - pad_min * span), max(hi, p_hat[i] + pad_min * span)
+    if np.isfinite(params.lower[i]):
+        lo = max(lo, params.lower[i] + 1e-9 * abs(params.lower[i]))
+    if np.isfinite(params.upper[i]):
+        hi = min(hi, params.upper[i] - 1e-9 * abs(params.upper[i]))
+    return lo, hi
+
+
+def objective_slice(misfit: Misfit, result: Identification, paths: list[Fit], budget: float,
+                    progress=None) -> ObjectiveSlice:
+    """J over the two most correlated parameters (or one) through the estimate (paper Fig. 2)."""
+    sim = misfit.simulation
+    p_hat = result.fit.p
+    i, j = pick_pair(result)
+
+    def J(p):
+        try:
+            return misfit.J(p)
+        except Exception:  # noqa: BLE001 - a failed forward run leaves a hole in the grid
+            return np.nan
+
+    if j is None:
+        lo, hi = _range(result, paths, i, 0.0)
+        pts = np.array([h.p[i] for f in paths for h in f.history if h.accepted])
+        a = np.union1d(np.linspace(lo, hi, 120), pts[(pts >= lo) & (pts <= hi)])
+        return ObjectiveSlice(i, None, a, None, np.array([J(np.array([v])) for v in a]), False)
+    (alo, ahi), (blo, bhi) = _range(result, paths, i, 0.3), _range(result, paths, j, 0.3)
+
+    def at(u, v):
+        p = p_hat.copy()
+        p[i], p[j] = u, v
+        return p
+
+    # probe: does a new point need its own factorisation, and what does it cost?
+    before, t0 = sim.counters.factorisations, time.perf_counter()
+    J(at(alo, blo))
+    J(at(ahi, bhi))
+    refactorises = sim.counters.factorisations - before >= 2
+    per_point = (time.perf_counter() - t0) / 2
+    ng = GRID
+    if refactorises:
+        ng = int(np.clip(np.sqrt(budget / max(per_point, 1e-6)), GRID_MIN, GRID))
+    a, b = np.linspace(alo, ahi, ng), np.linspace(blo, bhi, ng)
+    Jg = np.full((ng, ng), np.nan)
+    last = time.perf_counter()
+    for r, v in enumerate(b):
+        for c, u in enumerate(a):
+            Jg[r, c] = J(at(u, v))
+        if progress and time.perf_counter() - last > 2.0:
+            progress(f"objective on a {ng}×{ng} grid: row {r + 1} of {ng}")
+            last = time.perf_counter()
+    # SVD directions at the minimum (eqns 44-49) of the slice's two whitened sensitivity columns
+    ev = misfit.evaluate(p_hat, jacobian=True)
+    n = result.parameters.n
+    if n == 2:
+        V, sv, whole = result.reliability.directions, result.reliability.singular_values, True
+    else:
+        As = ev.whitened_sensitivity[:, [i, j]] * np.where(p_hat[[i, j]] != 0, np.abs(p_hat[[i, j]]), 1.0)
+        _, sv, Vt = np.linalg.svd(As, full_matrices=False)
+        V = np.zeros((n, 2))
+        V[[i, j], :] = Vt.T
+        whole = False
+    return ObjectiveSlice(i, j, a, b, Jg, refactorises, V, sv, whole)
+
+
+def profiles(sim, values: dict) -> dict[str, Profile]:
+    """The model along every instrument and at its stations after the last construction stage (for
+    the instrument and field figures), and along the line after each stage an instrument was read at."""
+    out = {}
+    read_at: dict[str, list[str]] = {}
+    for block in sim.survey.blocks:
+        read_at.setdefault(block.name, []).append(block.stage)
+    final = sim.stages[-1]
+    for block in sim.survey.blocks:
+        if block.name in out:  # the same instrument read at another stage
+            continue
+        line = along = disp = reading = None
+        by_stage = {}
+        stations = block.stations
+        if block.integration is not None:
+            s = np.cumsum(block.lengths)
+            d = (stations[-1] - stations[0]) / np.linalg.norm(stations[-1] - stations[0]) if len(stations) > 1 \
+                else np.array([0.0, -1.0])
+            start = stations[0] - s[0] * d
+            along = np.linspace(0.0, s[-1], LINE_POINTS)
+            line = start[None] + along[:, None] * d[None]
+            direction = block.weights[0, 0]
+
+            def at(stage):
+                u = sim.stage_displacements_at(values, np.vstack([line, start]), stage)
+                ref, u = u[-1], u[:-1]
+                return u, ((u - ref) @ direction if block.relative else u @ direction)
+
+            try:
+                disp, reading = at(final)
+                if len(read_at[block.name]) > 1:
+                    by_stage = {stage: at(stage)[1] for stage in read_at[block.name]}
+            except ValueError:
+                line = along = disp = reading = None
+        out[block.name] = Profile(along, line, disp, reading, sim.displacements_at(values, stations), by_stage)
+    return out
+
+
+def explore(misfit: Misfit, result: Identification, what=WHAT, settings: Settings = Settings(),
+            budget: float | None = None, progress=None) -> Exploration:
+    """Run the model where figures and field files need it (see the module docstring).
+
+    misfit: the one the result was fitted with; what: any of 'slice' (objective slice), 'other'
+    (the other method's fit, with `settings`), 'field' (the field at the estimate) and 'profiles'
+    (the model along the instruments), 'lining' (thrust and moments around a lining, if the model has
+    one), 'plastic_zone' (the yielded ground, if the ground can yield); budget: seconds the slice may take when every grid point refactorises (default: the fit's
+    own time, at least 1 s)."""
+    unknown = set(what) - set(WHAT)
+    if unknown:
+        raise ValueError(f"unknown exploration(s): {', '.join(sorted(unknown))} (known: {', '.join(WHAT)})")
+    say = progress or (lambda msg: None)
+    if result.weighting != misfit.weighting:
+        misfit = misfit.with_weighting(result.weighting)
+    sim = misfit.simulation
+    before, t0 = sim.counters.snapshot(), time.perf_counter()
+    if misfit.free and ("other" in what or "slice" in what):  # estimated error scales: the objective of the result
+        misfit = misfit.anchored(result.fit.p)
+    other, note = None, ""
+    if "other" in what:
+        method = other_method(result.fit.method)
+        say(f"the other method's path ({method})")
+        try:
+            other = fit(misfit, settings, method=method)
+        except Exception as exc:  # noqa: BLE001 - figures are still useful with one path
+            note = f"{method} failed: {exc}"
+    slc = None
+    if "slice" in what:
+        say("objective around the estimate")
+        budget = budget if budget is not None else max(1.0, result.seconds.get("fit", 1.0))
+        slc = objective_slice(misfit, result, [result.fit] + ([other] if other else []), budget, say)
+    values = misfit.values(result.fit.p)
+    fld = sim.field(values) if "field" in what else None
+    prof = profiles(sim, values) if "profiles" in what else {}
+    lining = sim.lining_forces(values) if "lining" in what else None
+    zone = sim.plastic_zone(values) if "plastic_zone" in what else None
+    return Exploration(other, note, slc, fld, prof, lining, zone, sim.counters.since(before),
+                       time.perf_counter() - t0)

@@ -1,0 +1,361 @@
+"""Excavation in elastic-perfectly plastic (Mohr-Coulomb) ground: readings at every construction stage
+and their exact sensitivities, behind the ``Simulation`` interface.
+
+The case's values map to the inputs of the incremental solver (``plasticity.solve``): per element
+E, nu (the ground's fields, extensions included: ``ground.Ground.fields``) and the strength c, phi,
+psi, tension of its layer (``strength.py``; linear-elastic layers get a strength no stress reaches);
+per quadrature point the geostatic stress sigma0 = (K0 sv, sv, K0 sv, 0), sv = -gamma depth
+(compression negative, K0 from the ground's fields at the point); the excavation load of eqn 33,
+f = -int_S N^t sigma0 n dS, from the same stresses at the wall points (times the extension 'beta'
+if switched on); the release lambda_k = beta_k of every stage (``construction.StagePlan``: the
+stress is released in increments up to beta_1, then beta_2, ...; one stage releasing all of it
+without a construction section). The readings of stage k are x = P u_k (eqn 29), u_k the
+displacement accumulated up to it.
+
+Everything in that map is plain arithmetic that accepts complex numbers, so the derivative of the
+inputs with respect to any named value is one complex step (exact to rounding); the solver turns
+them into du_k/dv by direct differentiation of the incremental problem (``plasticity.incremental``,
+eqns (3)-(4) there: one back-substitution per value and increment with the converged tangent).
+Every sensitivity is the exact derivative of the discrete solution for the increments used.
+
+Increments. A fixed schedule of ``INCREMENTS`` equal increments per unit of release (at least
+``MIN_STAGE`` per stage), fixed for the simulation's lifetime from the case's release fractions,
+so that x(v) is one smooth function of v for an optimiser (an adaptive schedule would change the
+discrete model from one point to the next); an increment whose Newton iteration fails is halved
+(down to 1e-4 of the release), and then that run's schedule differs. A run that still fails raises
+``plasticity.NonConvergence`` (a ``ForwardFailure``: in a fit, the trial step is rejected).
+
+One forward run gives x and A together: the last run is remembered, and a run asked for readings
+only computes the sensitivities of the names asked last, as long as the requests alternate with
+sensitivity requests (an optimiser asks for A at the point it has just accepted). Each increment's
+Newton iteration starts from the last run's solution of that increment when the residual is
+smaller there than at the previous converged state (warm start: an optimiser's next point is near
+its last); the converged solution is the same to the Newton tolerance either way.
+
+Forecasts and design read other instruments through ``Simulation.surveying`` (nothing survey-
+dependent is cached, see SURVEY_CACHES). Not modelled: a lining on yielding ground (refused by the case checks), cross-anisotropic elasticity.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from geoback.case.loading import LoadedCase
+from geoback.case.construction import StagePlan
+from geoback.errors import ForwardFailure, GeobackError
+from geoback.physics.fem import FEModel
+from geoback.physics.ground import COMPLEX_STEP, Ground
+from geoback.observation.instruments import InstrumentBlock
+from geoback.physics.mesh import Mesh, build_mesh
+from geoback.physics.plastic_zone import PlasticZone, equivalent_plastic_strain, measure
+from geoback.physics.simulation import Counters, Field, Prediction, Simulation, stage_survey
+from geoback.case.strength import MC_FIELDS, Strength
+
+INCREMENTS = 10  # equal load increments per unit of release
+MIN_STAGE = 2  # increments of a stage at least
+ANTICIPATE = 3  # readings-only runs after a sensitivity request that compute the sensitivities asked last
+DEG = np.pi / 180
+UNMODELLED = ("n", "m")  # extensions not available with yielding ground (cross-anisotropic elasticity)
+
+
+_CONTROLLERS: dict = {}
+
+
+def _one_thread(pardiso: bool):
+    """One thread for BLAS, MKL (PARDISO) and OpenMP during an elastoplastic run: its many
+    factorisations, back-substitutions and point-wise updates gain little from a second thread and
+    lose much when the cores are shared (measured at 17 k DOFs on two busy cores: a forward run in
+    1.7 s with one thread, 3.9-8.2 s with two). `pardiso`: the run factorises with PARDISO (loaded
+    first, so that its MKL threads are seen and limited too)."""
+    if pardiso not in _CONTROLLERS:
+        from threadpoolctl import ThreadpoolController
+
+        if pardiso:
+            from geoback.physics.solver import point_pypardiso_at_mkl
+
+            point_pypardiso_at_mkl()
+            import pypardiso  # noqa: F401
+        _CONTROLLERS[pardiso] = ThreadpoolController()
+    return _CONTROLLERS[pardiso].limit(limits=1)
+
+
+@dataclass
+class _Run:
+    key: tuple
+    names: tuple  # the values differentiated
+    u: np.ndarray  # (nstages, nfree)
+    du: np.ndarray | None  # (nstages, nfree, len(names))
+    result: object  # plasticity.Result
+
+
+class PlasticSimulation(Simulation):
+    """A case with mohr-coulomb ground, meshed, predicting readings at every construction stage."""
+
+    piecewise_smooth = True  # a quadrature point that starts to yield in another increment makes a kink
+
+    def __init__(self, loaded: LoadedCase, mesh: Mesh | None = None, blocks: list[InstrumentBlock] | None = None,
+                 extensions: Mapping | None = None, backend: str | None = None, increments: int = INCREMENTS):
+        from geoback.physics.plasticity import Options
+        from geoback.physics.plasticity.operators import PointOperators
+
+        case = loaded.case
+        self.loaded = loaded
+        self.plan = StagePlan.of(case)
+        if self.plan.lining is not None:
+            raise loaded.error(("construction", "lining"), "expected no lining with mohr-coulomb ground: a lining on "
+                                                           "yielding ground is not modelled")
+        self.strength = Strength.of(case)
+        t0 = time.perf_counter()
+        self.mesh = mesh or build_mesh(case, allow_large=getattr(loaded, "allow_large", False))
+        t1 = time.perf_counter()
+        g = case.geometry
+        self.fe = FEModel(self.mesh, g.width, g.depth, (0.0, -g.axis_depth), g.radius)
+        self.ops = PointOperators(self.fe)
+        self.ground = Ground(case, -self.fe.centroid[:, 1], self.fe.region, -self.fe.wall_points[:, 1],
+                             extensions or {})
+        xy = self.ops.point_coordinates()
+        self._point_depth = -xy[:, 1]
+        self._point_layer = np.repeat(self.fe.region, self.ops.nq)
+        t2 = time.perf_counter()
+        self.survey = stage_survey(loaded, blocks, self.stages, self.fe)
+        self.timings = {"mesh": t1 - t0, "assembly": t2 - t1, "observations": time.perf_counter() - t2}
+        self.backend = backend
+        self.counters = Counters()
+        self.options = Options(schedule=self._schedule(increments), refine=True, backend=backend)
+        self._run: _Run | None = None
+        self._warm: dict | None = None  # the last run's increments, to start the next one from (plasticity.solve)
+        self._wanted: tuple = ()
+        self._plain_requests = 0
+        from geoback.physics.plasticity.linear import default_backend
+
+        self._backend = backend or default_backend(self.fe.nfree)
+        self._pardiso = self._backend == "pardiso"
+
+    # ------------------------------------------------------------------ names
+    @property
+    def stages(self) -> list[str]:
+        return list(self.plan.names)
+
+    def quantities(self) -> dict[str, float]:
+        return {**self.ground.baseline(), **self.plan.quantities(), **self.strength.values}
+
+    def canonical(self, name: str) -> str | None:
+        if self.plan.knows(name):
+            return name
+        if name.partition("[")[0] in UNMODELLED:
+            return None
+        return self.strength.canonical(name) or self.ground.canonical(name)
+
+    def null_value(self, name: str, values: Mapping) -> float | None:
+        return self.ground.null_value(name, values)
+
+    def unit(self, name: str) -> str:
+        return self.strength.unit(name) or self.plan.unit(name) or self.ground.unit(name)
+
+    def limits(self, name: str, values: Mapping):
+        if self.strength.knows(name):
+            return self.strength.limits(name, values)
+        return self.ground.limits(name, values)
+
+    @property
+    def dofs(self) -> int:
+        return self.fe.ndof
+
+    @property
+    def solver(self) -> str | None:
+        return self._backend if self.counters.factorisations else None
+
+    def _schedule(self, increments: int) -> tuple:
+        """Fractions of each stage where increments end: INCREMENTS per unit of release, MIN_STAGE per stage."""
+        beta = self.plan.cumulative(self.plan.values)
+        steps = np.diff(np.concatenate([[0.0], beta]))
+        return tuple(tuple(np.linspace(0.0, 1.0, max(MIN_STAGE, int(np.ceil(increments * s - 1e-9))) + 1)[1:])
+                     for s in steps)
+
+    # ------------------------------------------------------------------ the inputs of the solver
+    def _inputs(self, values: Mapping):
+        """Material per element, sigma0 per point, the load f and the stages' lambda (complex-safe)."""
+        from geoback.physics.plasticity import Material
+
+        own = {k for k in values if self.plan.knows(k) or self.strength.knows(k)}
+        ground = {k: v for k, v in values.items() if k not in own}
+        pts = self.ground.fields(ground, self._point_depth, self._point_layer)
+        if np.any(pts.n != 1) or np.any(pts.m != 1):  # (canonical() does not know n, m)
+            raise GeobackError("cross-anisotropic stiffness (n, m) is not modelled with mohr-coulomb ground")
+        wall = self.ground.fields(ground)
+        gamma = self.loaded.case.ground.unit_weight
+        sv = -gamma * self._point_depth
+        k0 = pts.k0
+        sigma0 = np.stack([k0 * sv, sv + 0 * k0, k0 * sv, 0 * k0], axis=1)
+        sv_wall = -gamma * self.ground.wall_depth * wall.release
+        f = self.fe.load(sv_wall, wall.k0 * sv_wall)
+        layer_fields = [self.strength.fields(values, name) for name in self.ground.layers]
+        dtype = complex if any(isinstance(v, complex) for v in values.values()) else float
+        per = np.array([[np.nan if v is None else v for v in lf] for lf in layer_fields], dtype=dtype)
+        strength = per[self.fe.region]  # (ne, 4): c, phi, psi, tension
+        mat = Material(pts.E, pts.nu, strength[:, 0], strength[:, 1] * DEG, strength[:, 2] * DEG, strength[:, 3])
+        lam = self.plan.cumulative(values)
+        return mat, sigma0, f, lam
+
+    def _derivatives(self, values: Mapping, names: Sequence[str]) -> list:
+        """d inputs / d value for every name, one complex step each (exact for this analytic map)."""
+        from geoback.physics.plasticity import ParameterDerivative
+
+        out = []
+        for name in names:
+            v = dict(values)
+            h = COMPLEX_STEP * max(1.0, abs(values[name]))
+            v[name] = values[name] + 1j * h
+            mat, sigma0, f, lam = self._inputs(v)
+            d = {n: np.imag(getattr(mat, n)) / h for n in ("E", "nu", "c", "phi", "psi", "tension")}
+            out.append(ParameterDerivative(name, sigma0=np.imag(sigma0) / h, f=np.imag(f) / h,
+                                           stages=np.imag(lam) / h, **d))
+        return out
+
+    def _check_strength(self, values: Mapping) -> None:
+        for layer, plastic in zip(self.strength.layers, self.strength.plastic):
+            if not plastic:
+                continue
+            phi, psi = (float(np.real(values[f"{f}[{layer}]"])) for f in ("phi", "psi"))
+            if psi > phi:
+                raise ForwardFailure(f"dilation angle psi[{layer}] = {psi:.4g} deg above the friction angle phi[{layer}] "
+                                     f"= {phi:.4g} deg: not admissible")
+
+    # ------------------------------------------------------------------ forward
+    def _names_to_compute(self, values: Mapping, wrt: Sequence[str]) -> tuple:
+        """The values a new run differentiates: those asked, or for a readings-only run shortly after
+        a sensitivity request, those asked then."""
+        if wrt:
+            return tuple(wrt)
+        self._plain_requests += 1
+        if self._plain_requests <= ANTICIPATE:
+            return tuple(n for n in self._wanted if n in values)
+        return ()
+
+    def solution(self, values: Mapping, wrt: Sequence[str] = ()) -> _Run:
+        """The non-linear solution at `values` with du/dv for `wrt` (the last one is reused)."""
+        from geoback.physics.plasticity import NonConvergence, solve
+
+        key = tuple(sorted(values.items()))
+        if wrt:
+            self._wanted, self._plain_requests = tuple(wrt), 0
+        run = self._run
+        if run is not None and run.key == key and set(wrt) <= set(run.names):
+            return run
+        names = self._names_to_compute(values, wrt)
+        self._check_strength(values)
+        mat, sigma0, f, lam = self._inputs(values)
+        derivs = self._derivatives(values, names) if names else None
+        self.counters.forward_runs += 1
+        try:
+            with _one_thread(self._pardiso):
+                res = solve(self.fe, mat, sigma0, f, lam, derivatives=derivs, options=self.options,
+                            operators=self.ops, warm=self._warm)
+        except NonConvergence as exc:
+            self._count(exc.counters)
+            raise
+        except ValueError as exc:  # the in-situ stress outside the strength at these values
+            if "yield condition" in str(exc):
+                raise ForwardFailure(f"the in-situ stress exceeds the Mohr-Coulomb strength at these values "
+                                     f"({exc})") from None
+            raise
+        self._count(res.counters)
+        self._warm = res.warm
+        self._run = _Run(key, tuple(names), res.u, res.du_dp, res)
+        return self._run
+
+    def _count(self, c) -> None:
+        """Add a solver run's counters (plasticity.linear.Counters) to the simulation's."""
+        if c is None:
+            return
+        self.counters.factorisations += c.factorisations
+        self.counters.solves += c.backsubstitutions
+        self.counters.seconds_factorising += c.seconds.get("factorise", 0.0)
+        self.counters.seconds_solving += c.seconds.get("backsubstitute", 0.0)
+        self.counters.seconds_assembling += c.seconds.get("assemble tangent", 0.0)
+
+    # Forecasts and `geoback design` read other instruments (Simulation.surveying): nothing here is
+    # cached per survey row - the last run holds u and du/dv on every dof of every stage, and each
+    # row's stage is read from the survey at every call - so there is nothing to swap, and the
+    # forecasts read the fit's last run without a new one.
+    SURVEY_CACHES: tuple[str, ...] = ()
+
+    def _row_stage(self) -> np.ndarray:
+        index = {n: k for k, n in enumerate(self.stages)}
+        return np.array([index[lab.stage] for lab in self.survey.labels], np.int64)
+
+    def _readings(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
+        run = self.solution(values, wrt)
+        rows = self._row_stage()
+        P = self.survey.P
+        X = P @ run.u.T  # (m, nstages)
+        x = X[np.arange(len(rows)), rows]
+        if not wrt:
+            return Prediction(x)
+        A = np.empty((len(x), len(wrt)))
+        cols = [run.names.index(n) for n in wrt]
+        for k in range(len(self.stages)):
+            sel = rows == k
+            if sel.any():
+                A[sel] = (P[sel] @ run.du[k][:, cols])
+        return Prediction(x, A)
+
+    def stage_displacements(self, values: Mapping) -> np.ndarray:
+        """u_k on the free dofs after every stage (nstages, nfree)."""
+        return self.solution(values).u
+
+    def displacements_at(self, values: Mapping, points: np.ndarray) -> np.ndarray:
+        return self.stage_displacements_at(values, points, self.stages[-1])
+
+    def stage_displacements_at(self, values: Mapping, points: np.ndarray, stage: str) -> np.ndarray:
+        Ix, Iy = self.fe.interpolation(points)
+        u = self.stage_displacements(values)[self.stages.index(stage)]
+        return np.column_stack([Ix @ u, Iy @ u])
+
+    def release(self) -> None:
+        """Forget the last run (and the warm start it offers): the next run starts from scratch."""
+        self._run, self._warm = None, None
+
+    # ------------------------------------------------------------------ fields and the plastic zone
+    def _point_plastic_strain(self, values: Mapping, run: _Run) -> np.ndarray:
+        """Equivalent plastic strain at every point after every stage (nstages, npts)."""
+        mat, sigma0, _, _ = self._inputs(values)
+        E, nu = (self.ops.per_point(np.real(v)) for v in (mat.E, mat.nu))
+        s0 = np.real(sigma0)
+        out = np.empty((len(self.stages), self.ops.npts))
+        for k in range(len(self.stages)):
+            strain = self.ops.strain(run.u[k])
+            out[k] = equivalent_plastic_strain(strain, run.result.sigma[k].reshape(-1, 4) - s0, E, nu)
+        return out
+
+    def plastic_zone(self, values: Mapping) -> PlasticZone:
+        """Extent, depth range and area of the yielded ground after every stage (``plastic_zone.py``)."""
+        run = self.solution(values)
+        res = run.result
+        g = self.loaded.case.geometry
+        yielded = res.yielded.reshape(len(self.stages), -1)
+        return measure(self.stages, np.real(self.plan.cumulative(values)), self.ops.point_coordinates(),
+                       self.ops.w.reshape(-1), yielded, (0.0, -g.axis_depth), g.radius, self.mesh,
+                       self._point_plastic_strain(values, run), {k: float(np.real(v)) for k, v in values.items()})
+
+    def field(self, values: Mapping) -> Field:
+        """Displacement after the last stage (and after each stage as point data when there are several);
+        per cell the stress after the last stage (quadrature mean), and per stage the share of the cell
+        that has yielded (``plastic[stage]``) and its equivalent plastic strain (``plastic_strain[stage]``)."""
+        run = self.solution(values)
+        full = [self.fe.expand(u).reshape(-1, 2) for u in run.u]
+        w = self.ops.w
+        mean = (run.result.sigma[-1] * w[..., None]).sum(axis=1) / w.sum(axis=1)[:, None]
+        cell = {"stress_xx": mean[:, 0], "stress_yy": mean[:, 1], "stress_zz": mean[:, 2], "stress_xy": mean[:, 3]}
+        zone = self.plastic_zone(values)
+        for k, stage in enumerate(self.stages):
+            cell[f"plastic[{stage}]"] = zone.cell_yielded[k]
+            cell[f"plastic_strain[{stage}]"] = zone.cell_plastic_strain[k]
+        point = {f"displacement[{n}]": u for n, u in zip(self.stages, full)} if len(self.stages) > 1 else {}
+        return Field(self.mesh, full[-1], cell, point)
+
+
+__all__ = ["PlasticSimulation", "INCREMENTS", "MC_FIELDS"]

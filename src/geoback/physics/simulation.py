@@ -1,0 +1,246 @@
+"""Physics behind one interface.
+
+A *simulation* is built from a case and a mesh and answers one question: the readings of its
+survey, and their sensitivities, at given named values,
+
+    x(v) = P u(v) - G c,      A = dx/dv   (eqns 29, 31-42),
+
+with its counters of factorisations and solves. Named values are the ground's (``E[clay]``,
+``K0``, ...), the extensions' (``Egrad[clay]``, ``beta``, ...) and the instruments' integration
+constants (``B[I1]``, ...). The one-step linear-elastic excavation (``elastic.py``) is the first
+implementation; statistics, diagnosis and reports see only this interface.
+"""
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from geoback.observation.instruments import CONSTANT_STEMS, Survey, build_survey, is_instrument_error
+
+
+@dataclass
+class Counters:
+    """What a simulation has spent: factorisations, back-substitutions, forward runs, seconds."""
+
+    factorisations: int = 0
+    solves: int = 0  # right-hand sides back-substituted
+    forward_runs: int = 0
+    seconds_factorising: float = 0.0
+    seconds_solving: float = 0.0
+    seconds_assembling: float = 0.0
+
+    def snapshot(self) -> dict:
+        return dict(vars(self))
+
+    def since(self, before: dict) -> dict:
+        """The counts spent since `before` (a snapshot)."""
+        return {k: v - before.get(k, 0) for k, v in vars(self).items()}
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Computed readings x and, if asked, A = dx/dv for the names asked (physical units)."""
+
+    x: np.ndarray
+    A: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Field:
+    """A solution on the mesh, for outputs: nodal displacement (N, 2), cell data by name and more
+    point data by name (e.g. the displacement after every construction stage)."""
+
+    mesh: object
+    displacement: np.ndarray
+    cell_data: dict = field(default_factory=dict)
+    point_data: dict = field(default_factory=dict)
+
+
+def is_constant(name: str) -> bool:
+    """Integration constants of linewise instruments: A[X1], B[I1], C[D1], D[D1]."""
+    return name.split("[")[0] in CONSTANT_STEMS and name.endswith("]")
+
+
+def is_instrument_term(name: str) -> bool:
+    """Names the survey owns rather than the physics: integration constants (A[X1], B[I1], ...) and
+    inclinometers' systematic errors (bias[I1], zoff[I1])."""
+    return is_constant(name) or is_instrument_error(name)
+
+
+class Simulation(ABC):
+    """Readings of a survey and their sensitivities at named values (see the module docstring).
+
+    Subclasses provide the physics: ``quantities``, ``canonical``, ``null_value``, ``unit``,
+    ``_readings`` (x = P u and its sensitivity) and ``field``; this class adds the instruments'
+    integration constants (x -= G c, eqns 11, 15, 18), which no physics needs to know about.
+    """
+
+    loaded: object  # the LoadedCase it was built from
+    survey: Survey
+    reads_depth_offsets: bool = False  # _readings observes with survey.operator(values) (zoff[I1] available)
+    counters: Counters
+    timings: dict
+    mesh: object
+    # readings only piecewise smooth in the values (ground switching between elastic and plastic): J has
+    # kinks, so an optimiser stops once J no longer falls by a meaningful amount (estimate.PIECEWISE_TOL)
+    piecewise_smooth: bool = False
+
+    # ------------------------------------------------------------------ names
+    @abstractmethod
+    def quantities(self) -> dict[str, float]:
+        """Every named physical value of the case, at the case's values."""
+
+    @abstractmethod
+    def canonical(self, name: str) -> str | None:
+        """Full name of a physical quantity ('E' -> 'E[clay]' for one layer); None if unknown."""
+
+    @abstractmethod
+    def null_value(self, name: str, values: Mapping) -> float | None:
+        """Value of an extension quantity at which the model is the baseline; None if not one."""
+
+    @abstractmethod
+    def unit(self, name: str) -> str:
+        """Unit of a physical quantity."""
+
+    @abstractmethod
+    def limits(self, name: str, values: Mapping):
+        """Allowed and usual range of a physical quantity (``ground.Limits``)."""
+
+    @property
+    def stages(self) -> list[str]:
+        """Construction stages the simulation computes, in order (readings are taken at them)."""
+        return ["excavation"]
+
+    def known_names(self) -> list[str]:
+        """Examples of valid names, for messages."""
+        return sorted(self.quantities()) + list(self.survey.constant_names) + list(self.survey.error_names)
+
+    # ------------------------------------------------------------------ predictions
+    @abstractmethod
+    def _readings(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
+        """x = P u(values) and, for the physical names in `wrt`, its sensitivity columns."""
+
+    @abstractmethod
+    def field(self, values: Mapping) -> Field:
+        """Displacement and stress fields at `values` (outputs; not needed by a fit)."""
+
+    @abstractmethod
+    def displacements_at(self, values: Mapping, points: np.ndarray) -> np.ndarray:
+        """(ux, uy) at points (k, 2) of the ground; ValueError for a point outside it."""
+
+    def stage_displacements_at(self, values: Mapping, points: np.ndarray, stage: str) -> np.ndarray:
+        """(ux, uy) at points accumulated up to construction stage `stage`."""
+        if stage != self.stages[-1]:
+            raise ValueError(f"this simulation computes stage '{self.stages[-1]}' only, not '{stage}'")
+        return self.displacements_at(values, points)
+
+    def lining_forces(self, values: Mapping):
+        """Thrust, shear and bending moment around the lining per stage (``lining.LiningForces``);
+        None for a model without a lining."""
+        return None
+
+    def plastic_zone(self, values: Mapping):
+        """The yielded ground after every stage (``plastic_zone.PlasticZone``); None for a model
+        whose ground cannot yield."""
+        return None
+
+    def predict(self, values: Mapping, wrt: Sequence[str] = (), sensitivities: bool = False) -> Prediction:
+        """Readings at `values` (constants A-D and the inclinometers' bias and zoff default to 0);
+        with `sensitivities`, A = dx/d(wrt).
+
+        The physics computes every row of ``survey.operator(values)`` (the readings, read at the
+        inclinometers' depth offsets, and below them their depth derivatives D u); here
+        x = P u - G c + E b, dx/d zoff = D u (exact)."""
+        survey = self.survey
+        physical = [n for n in wrt if not is_instrument_term(n)] if sensitivities else []
+        if not self.reads_depth_offsets and (survey.offsets(values) or any(n in survey.depth_rows for n in wrt)):
+            raise NotImplementedError(f"{type(self).__name__} does not read the survey at depth offsets: "
+                                      f"inclinometer depth offsets (zoff) are not available with it")
+        pred = self._readings(values, physical)
+        m = survey.m
+        x = pred.x[:m]
+        A_phys = pred.A[:m] if sensitivities and pred.A is not None else None
+        for name, v in values.items():
+            if v == 0:
+                continue
+            if is_constant(name):
+                x = x - survey.G[:, survey.constant_names.index(name)] * v
+            elif name.startswith("bias[") and name in survey.error_names:
+                x = x + survey.bias_column(name) * v
+        if not sensitivities:
+            return Prediction(x)
+        A = np.zeros((len(x), len(wrt)))
+        k = 0
+        for j, name in enumerate(wrt):
+            if is_constant(name):
+                A[:, j] = survey.constant_column(name)
+            elif name in survey.depth_rows:
+                rows, extra = survey.depth_rows[name]
+                A[rows, j] = pred.x[extra]
+            elif is_instrument_error(name):
+                A[:, j] = survey.bias_column(name)
+            else:
+                A[:, j] = A_phys[:, k]
+                k += 1
+        return Prediction(x, A)
+
+    def release(self) -> None:
+        """Free memory held by factorisations (the simulation stays usable)."""
+
+    # ------------------------------------------------------------------ other instruments
+    SURVEY_CACHES: tuple[str, ...] = ()  # attributes holding results per survey row
+
+    @contextmanager
+    def surveying(self, blocks):
+        """The simulation reading other instruments for a while (forecast points, candidate
+        instruments): the same mesh, factorisations and remembered solutions, another survey.
+
+            with simulation.surveying(blocks) as sim:
+                q = sim.predict(values, names, sensitivities=True)
+        """
+        saved = {a: getattr(self, a) for a in ("survey",) + self.SURVEY_CACHES}
+        self.survey = build_survey(blocks, self.fe)
+        self._survey_changed(saved)
+        try:
+            yield self
+        finally:
+            for a, v in saved.items():
+                setattr(self, a, v)
+
+    def _survey_changed(self, saved: dict) -> None:
+        """Re-derive what SURVEY_CACHES hold for the new survey (`saved`: the old values)."""
+
+
+class Stopwatch:
+    """Adds elapsed seconds to a counter attribute: ``with Stopwatch(counters, 'seconds_solving'):``."""
+
+    def __init__(self, counters: Counters, attr: str):
+        self.counters, self.attr = counters, attr
+
+    def __enter__(self):
+        self.t0 = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        setattr(self.counters, self.attr, getattr(self.counters, self.attr) + time.perf_counter() - self.t0)
+        return False
+
+
+def stage_survey(loaded, blocks, stages: list[str], fe) -> Survey:
+    """The survey of `blocks` on the FE model `fe` (default: every instrument of the case read at the
+    last stage); a block read at a stage the simulation does not compute is refused, located."""
+    from geoback.observation.instruments import build_survey, case_blocks
+
+    blocks = blocks if blocks is not None else [b.at(stages[-1]) for b in case_blocks(loaded)]
+    late = [b for b in blocks if b.stage not in stages]
+    if late:
+        expected = (f"expected one of the construction stages ({', '.join(stages)})" if len(stages) > 1
+                    else f"the case has one construction stage ('{stages[-1]}')")
+        raise loaded.error(("instruments", late[0].index, "readings"),
+                           f"readings of '{late[0].name}' at stage '{late[0].stage}': {expected}")
+    return build_survey(blocks, fe)

@@ -1,0 +1,115 @@
+"""Figures of a run (`geoback run --plots`), after the paper's Figs. 2-5 and 8, one module each:
+
+- ``objective``: J over the two most correlated parameters with the Gauss-Newton and
+  Levenberg-Marquardt paths and the SVD directions V1, V2 at the minimum (Fig. 2);
+- ``convergence``: J and the parameters (relative to their final values) per iteration (Figs. 3-4);
+- ``information``: rows of Q for the readings of highest leverage, and Q itself (Figs. 5, 8);
+- ``instruments``: measured and computed readings along every instrument with +-2 sigma bands;
+- ``field``: the deformed mesh coloured by the displacement magnitude, with the instruments;
+- ``lining``: thrust, bending moment and shear around the lining per construction stage (models
+  with a lining only);
+- ``plastic``: the plastic zone around the tunnel after every stage (ground that can yield only).
+
+Figures are built as :class:`matplotlib.figure.Figure` objects without pyplot (no global state,
+headless) from an ``Identification`` and an ``Exploration`` (``geoback.inference.explore``): building them
+runs no model. :func:`build_figures` returns them, :func:`save_figures` writes them and
+:func:`plot_run` does both.
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import matplotlib
+
+from geoback.outputs import write_atomic
+from geoback.reports.plots.common import DPI, RC
+from geoback.reports.plots.convergence import convergence_figure
+from geoback.reports.plots.field import field_figure
+from geoback.reports.plots.information import information_density_figure
+from geoback.reports.plots.instruments import instruments_figure
+from geoback.reports.plots.lining import lining_figure
+from geoback.reports.plots.objective import objective_contours_figure
+from geoback.reports.plots.plastic import plastic_zone_figure
+
+FIGURES = ("objective_contours", "convergence", "information_density", "instruments", "field")
+OPTIONAL = ("lining", "plastic_zone")  # figures of what only some models have, built when the exploration holds it
+FORMATS = ("png", "svg")
+NEEDS = {"objective_contours": ("slice", "other"), "convergence": ("other",), "information_density": (),
+         "instruments": ("profiles",), "field": ("field", "profiles"),
+         "lining": ("lining",), "plastic_zone": ("plastic_zone",)}  # what each reads from the exploration
+_BUILD = {"objective_contours": objective_contours_figure, "convergence": convergence_figure,
+          "information_density": lambda res, exploration: information_density_figure(res),
+          "instruments": instruments_figure, "field": field_figure,
+          "lining": lambda res, exploration: lining_figure(exploration.lining, res) if exploration.lining else None,
+          "plastic_zone": lambda res, exploration: (plastic_zone_figure(exploration.plastic_zone, res)
+                                                    if exploration.plastic_zone else None)}
+
+
+def exploration_for(names=FIGURES + OPTIONAL) -> tuple[str, ...]:
+    """What ``explore`` must compute for these figures."""
+    return tuple(sorted({w for n in names for w in NEEDS[n]}))
+
+
+def build_figures(res, exploration, names: tuple[str, ...] | None = None) -> dict:
+    """Every figure of the run, by name (the exploration must hold what they need); by default the
+    FIGURES and, where the exploration has what they show (a lining), the OPTIONAL ones."""
+    if names is None:
+        names = FIGURES + tuple(n for n in OPTIONAL if getattr(exploration, n, None) is not None)
+    unknown = [n for n in names if n not in FIGURES + OPTIONAL]
+    if unknown:
+        raise ValueError(f"unknown figure(s): {', '.join(unknown)} (figures: {', '.join(FIGURES + OPTIONAL)})")
+    with matplotlib.rc_context(RC):
+        figs = {name: _BUILD[name](res, exploration) for name in names}
+    return {name: fig for name, fig in figs.items() if fig is not None}
+
+
+def _compact_png(data: bytes) -> bytes:
+    """The PNG with an adaptive 256-colour palette (a third of the size, no visible change)."""
+    try:
+        from PIL import Image
+
+        im = Image.open(io.BytesIO(data)).convert("RGB")
+        q = im.quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+        buf = io.BytesIO()
+        q.save(buf, format="PNG", optimize=True)
+        return buf.getvalue() if buf.tell() < len(data) else data
+    except Exception:  # noqa: BLE001 - Pillow missing or too old: keep matplotlib's PNG
+        return data
+
+
+def save_figures(figs: dict, out: Path, formats: tuple[str, ...] = FORMATS, dpi: int = DPI,
+                 compact: bool = True) -> list[Path]:
+    """Write each figure as out/<name>.<format> (atomically); return the paths.
+
+    compact: store PNGs with a 256-colour palette (Pillow), about three times smaller."""
+    out = Path(out)
+    paths = []
+    with matplotlib.rc_context(RC):
+        for name, fig in figs.items():
+            for fmt in formats:
+                buf = io.BytesIO()
+                meta = {"Date": None} if fmt == "svg" else {"Software": None} if fmt == "png" else None
+                fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta)
+                data = buf.getvalue()
+                if fmt == "png" and compact:
+                    data = _compact_png(data)
+                path = out / f"{name}.{fmt}"
+                write_atomic(path, data)
+                paths.append(path)
+    return paths
+
+
+def plot_run(res, exploration, out: Path, formats: tuple[str, ...] = FORMATS) -> list[Path]:
+    """Build every figure of the run and write PNG and SVG files into `out`; return the paths."""
+    figs = build_figures(res, exploration)
+    if getattr(res, "forecasts", None) is not None:
+        from geoback.reports.plots.forecast import forecast_figures
+
+        with matplotlib.rc_context(RC):
+            figs.update(forecast_figures(res.forecasts))
+    try:
+        return save_figures(figs, out, formats)
+    finally:
+        for fig in figs.values():
+            fig.clear()

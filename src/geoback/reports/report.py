@@ -1,0 +1,264 @@
+"""Outputs of `geoback run`: CSV tables, summary.json, report.md and field.vtu.
+
+Readers only: everything comes from the frozen ``Identification`` and, for the field and the
+figures, from the ``Exploration``; nothing here runs the model.
+"""
+from __future__ import annotations
+
+import platform
+from pathlib import Path
+
+import numpy as np
+
+from geoback import __version__
+from geoback.outputs import write_atomic, write_csv, write_json, write_matrix_csv
+from geoback.reports.resultsets import result_set
+
+
+def reading_label(lab, staged: bool = False) -> str:
+    """instrument:station:component, and @stage when readings come from several construction stages."""
+    return f"{lab.instrument}:{lab.station}:{lab.component}" + (f"@{lab.stage}" if staged else "")
+
+
+def several_stages(labels) -> bool:
+    return len({lab.stage for lab in labels}) > 1
+
+
+def summary(res, exploration=None) -> dict:
+    f, rel, params = res.fit, res.reliability, res.parameters
+    lo, hi = rel.interval95()
+    lo, hi = res.intervals95()
+    out = {
+        "case": res.name,
+        "case_hash": res.case_hash,
+        "geoback_version": __version__,
+        "status": res.status,
+        "converged": f.status == "converged",
+        "stop_reason": f.reason,
+        "method": f.method,
+        "weighting": res.weighting,
+        "iterations": f.iterations,
+        "parameters": {n: {"unit": params.units[i], "initial": params.initial[i], "estimate": f.p[i],
+                           "std": rel.std[i], "ci95": [lo[i], hi[i]],
+                           "ci95_method": "profile likelihood" if n in res.profiled else "linearised",
+                           "ci95_open": list(res.profiled[n][2:]) if n in res.profiled else [False, False],
+                           "at_bound": bool(f.at_bound[i]),
+                           **(res.prior_posterior.as_dict(i) if res.prior_posterior is not None else {})}
+                       for i, n in enumerate(params.names)},
+        "warnings": [c.as_dict() for c in res.caveats],
+        "mesh_error": ({**res.mesh_error.as_dict(), "included_in_C_x": res.mesh_error_included}
+                       if res.mesh_error is not None else {"checked": False, "reason": "fit.mesh_error: ignore"}),
+        "J": f.J, "chi2": rel.chi2, "dof": rel.dof, "reduced_chi2": rel.reduced_chi2, "p_value": rel.p_value,
+        "minus_2_log_likelihood": rel.minus2logL, "aic": rel.aic, "bic": rel.bic,
+        "condition_number": rel.condition, "undetermined": rel.undetermined,
+        "error_scales": [e.as_dict() for e in rel.error_scales],
+        "readings": res.data.m, "dofs": res.dofs, "elements": res.elements,
+        **res.counts, "solver": res.solver,
+        "timings_s": {k: round(v, 4) for k, v in res.seconds.items()},
+        "platform": platform.platform(),
+    }
+    if rel.parameter_dof is not None:  # estimated error scales: t intervals and the F ellipse
+        for i, n in enumerate(params.names):
+            out["parameters"][n]["dof"] = rel.parameter_dof[i]
+        out["ellipse_dof"] = rel.ellipse_dof
+        out["ellipse_limit_95"] = rel.ellipse_limit(0.95)
+    zone = getattr(exploration, "plastic_zone", None)
+    if zone is not None:
+        out["plastic_zone"] = zone.as_dict()
+    if res.forecasts is not None:
+        from geoback.reports.forecast_report import as_dict
+
+        out["forecasts"] = as_dict(res.forecasts)
+    if exploration is not None:  # the work of the field file and figures, apart from the identification's
+        out["exploration"] = {k: exploration.counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}
+        out["timings_s"]["exploration"] = round(exploration.seconds, 4)
+    return out
+
+
+def _cv(value: float, std: float) -> str:
+    if value == 0 or not np.isfinite(std):
+        return ""
+    return f" ({100 * std / abs(value):.0f} %)" if std / abs(value) >= 0.01 else f" ({100 * std / abs(value):.2g} %)"
+
+
+def report_text(res, exploration=None) -> str:
+    """A one-page report in the spirit of lmfit's fit_report, warnings first; the plastic zone at the
+    estimate when the exploration holds it."""
+    f, rel, params = res.fit, res.reliability, res.parameters
+    lines = [f"# geoback fit report: {res.name}", ""]
+    if res.caveats:
+        lines += ["**Warnings**", ""] + [f"- [{c.code}] {c.message}" for c in res.caveats] + [""]
+    lines += [f"- status: **{res.status}** ({f.reason})",
+              f"- method: {f.method}, {f.iterations} iterations, {res.counts['factorisations']} factorisation(s), "
+              f"{res.counts['solves']} solves",
+              f"- readings m = {res.data.m}, parameters n = {params.n}, dofs = {res.dofs}",
+              chi2_line(rel),
+              f"- AIC = {rel.aic:.6g}, BIC = {rel.bic:.6g}, condition number = {rel.condition:.3g}", "",
+              "| parameter | unit | initial | estimate | std | 95 % interval |", "|---|---|---|---|---|---|"]
+    lo, hi = res.intervals95()
+    for i, n in enumerate(params.names):
+        bound = " (at bound)" if f.at_bound[i] else ""
+        how, (lo_open, hi_open) = "", (False, False)
+        if n in res.profiled:
+            how, (lo_open, hi_open) = " (profile likelihood)", res.profiled[n][2:]
+        ends = (f"≤ its bound {lo[i]:.6g}" if lo_open else f"{lo[i]:.6g}",
+                f"≥ its bound {hi[i]:.6g}" if hi_open else f"{hi[i]:.6g}")
+        lines.append(f"| {n} | {params.units[i]} | {params.initial[i]:.6g} | {f.p[i]:.6g}{bound} | "
+                     f"{rel.std[i]:.3g}{_cv(f.p[i], rel.std[i])} | [{ends[0]}, {ends[1]}]{how} |")
+    lines += prior_posterior_lines(res)
+    if rel.parameter_dof is not None:
+        lines += ["", "The error scales are estimated: the intervals are Student t on "
+                  + ", ".join(f"{n} {d:.3g}" for n, d in zip(params.names, rel.parameter_dof))
+                  + f" degrees of freedom (Satterthwaite), the 95 % ellipse d² < {rel.ellipse_limit(0.95):.3g} "
+                    f"(n F(n, {rel.ellipse_dof:.3g}))."]
+    lines += error_scale_lines(rel)
+    if rel.scales_estimated and res.weighting != "full":
+        lines += ["", f"(weighting '{res.weighting}': the error scales multiply the weighting's covariance "
+                      f"({'I, 1 m² per reading' if res.weighting == 'identity' else 'the diagonal of C_x'}), "
+                      "not the stated C_x.)"]
+    strong = [(params.names[i], params.names[j], rel.correlation[i, j])
+              for i in range(params.n) for j in range(i + 1, params.n)
+              if np.isfinite(rel.correlation[i, j]) and abs(rel.correlation[i, j]) > 0.5]
+    if strong:
+        lines += ["", "Correlations above 0.5: " + ", ".join(f"C({a}, {b}) = {c:+.3f}" for a, b, c in strong)]
+    if res.mesh_error is not None:
+        lines += ["", "Mesh: " + res.mesh_error.text() + (" - included in C_x for this fit"
+                                                           if res.mesh_error_included else "")]
+    top = np.argsort(-rel.leverage)[:3]
+    lines += ["", "Most informative readings (leverage = diag Q): " +
+              ", ".join(f"{reading_label(res.data.labels[i], several_stages(res.data.labels))} "
+                        f"({rel.leverage[i]:.2f})" for i in top)]
+    zone = getattr(exploration, "plastic_zone", None)
+    if zone is not None:
+        lines += zone.lines()
+    text = "\n".join(lines) + "\n"
+    if res.forecasts is not None:
+        from geoback.reports.forecast_report import report_section
+
+        text += report_section(res.forecasts)
+    return text
+
+
+def prior_posterior_lines(res) -> list[str]:
+    """Prior -> posterior std of each parameter and its identifiability (identifiability.py)."""
+    pp = res.prior_posterior
+    if pp is None:
+        return []
+    out = ["", "What the readings tell (prior → posterior std; identifiability 0: nothing beyond the prior, "
+               "1: fixed by the readings):", "",
+           "| parameter | prior std | prior | posterior std | reduction | identifiability |", "|---|---|---|---|---|---|"]
+    for i, n in enumerate(pp.names):
+        out.append(f"| {n} | {pp.prior_std[i]:.3g} | {pp.prior_source[i]} | {pp.posterior_std[i]:.3g} | "
+                   f"{100 * pp.reduction[i]:.0f} % | {pp.identifiability[i]:.2f} |")
+    if "usual range" in pp.prior_source:
+        out += ["", "(usual range: no prior in the case, so an uninformed one spanning the usual range for ground "
+                    "as its 95 % interval, in ln p for positive quantities.)"]
+    return out
+
+
+def chi2_line(rel) -> str:
+    if not rel.scales_estimated:
+        return (f"- chi-square = {rel.chi2:.6g}, dof = {rel.dof}, reduced chi-square = {rel.reduced_chi2:.4g}, "
+                f"p-value = {rel.p_value:.3g}")
+    if rel.dof <= 0:
+        return "- chi-square: every reading's scale is estimated, so no χ² test of the stated σ's (see the error scales)"
+    return (f"- chi-square of the readings whose σ is known (and of the priors) = {rel.chi2:.6g}, dof = {rel.dof:.4g}, "
+            f"reduced chi-square = {rel.reduced_chi2:.4g}, p-value = {rel.p_value:.3g} (Satterthwaite)")
+
+
+ERROR_SCALE_HEADER = ["group", "instruments", "treatment", "readings", "dof", "k", "k_low95", "k_high95",
+                      "k_readings", "p_stated", "p_allowed", "allowed_test", "ratio_to_others", "J_stated", "text"]
+
+
+def error_scale_rows(rel) -> list[list]:
+    return [[e.name, " ".join(e.instruments), e.treatment, e.readings, e.dof, e.factor, e.low, e.high,
+             e.readings_factor, e.p_stated, e.p_allowed, e.allowed_test, e.ratio_to_others, e.J, e.text]
+            for e in rel.error_scales]
+
+
+def error_scale_lines(rel) -> list[str]:
+    """The error-scale table of the report: k = true σ / stated σ of each instrument or group."""
+    if not rel.error_scales:
+        return []
+    out = ["", "Error scales (k = true σ / stated σ; c = readings minus the parameters' share):", "",
+           "| group | treatment | readings | c | k | 95 % interval | p (stated σ) |", "|---|---|---|---|---|---|---|"]
+    for e in rel.error_scales:
+        k = f"{e.factor:.3g}" if e.estimated else f"1 (readings: {e.readings_factor:.3g})"
+        out.append(f"| {e.name} | {e.treatment} | {e.readings} | {e.dof:.3g} | {k} | [{e.low:.3g}, {e.high:.3g}] | "
+                   f"{e.p_stated:.2g} |")
+    out += [""] + [f"- {e.text}" for e in rel.error_scales]
+    return out
+
+
+def write_field(field, path: Path) -> None:
+    """Displacement (point data) and cell data (stresses, ...) as VTU for ParaView; more point data
+    (the displacement after every construction stage) if the field has it."""
+    from geoback.reports.fields import write_mesh
+
+    def vec(v):
+        v = np.asarray(v)
+        return np.column_stack([v, np.zeros(len(v))]) if v.ndim == 2 and v.shape[1] == 2 else v
+
+    point = {"displacement": vec(field.displacement)}
+    point.update({k: vec(v) for k, v in getattr(field, "point_data", {}).items()})
+    write_mesh(field.mesh, path, point_data=point, cell_data=field.cell_data)
+
+
+def write_run(res, out: Path, exploration=None, plots: bool = False) -> None:
+    """Every file of a run, replacing the previous run's set in `out` as a whole (outputs.result_set);
+    the field (field.vtu) and figures if the exploration has them."""
+    with result_set(out, "run") as staging:
+        _write_run(res, staging, exploration, plots)
+
+
+def _write_run(res, out: Path, exploration, plots: bool) -> None:
+    f, rel, params = res.fit, res.reliability, res.parameters
+    names = params.names
+    out = Path(out)
+    lo, hi = res.intervals95()
+    pp = res.prior_posterior
+    write_csv(out / "parameters.csv",
+              ["name", "unit", "initial", "estimate", "std", "ci95_low", "ci95_high", "ci95_method", "at_bound",
+               "prior_std", "prior_source", "posterior_std", "identifiability"],
+              [[n, params.units[i], params.initial[i], f.p[i], rel.std[i], lo[i], hi[i],
+                "profile likelihood" if n in res.profiled else "linearised", bool(f.at_bound[i])]
+               + ([pp.prior_std[i], pp.prior_source[i], pp.posterior_std[i], pp.identifiability[i]] if pp is not None
+                  else ["", "", "", ""])
+               for i, n in enumerate(names)])
+    write_matrix_csv(out / "covariance.csv", names, rel.covariance)
+    write_matrix_csv(out / "correlation.csv", names, rel.correlation)
+    write_csv(out / "eigen.csv", ["index", "singular_value"] + [f"v_{n}" for n in names],
+              [[i + 1, rel.singular_values[i]] + list(rel.directions[:, i]) for i in range(len(rel.singular_values))])
+    staged = several_stages(res.data.labels)
+    labels = [reading_label(lab, staged) for lab in res.data.labels]
+    write_matrix_csv(out / "information_density.csv", labels, rel.information_density)
+    measured = res.data.measured
+    residual = measured - f.x
+    write_csv(out / "readings.csv",
+              ["instrument", "kind", "station", "stage", "component", "x", "y", "measured", "computed", "residual",
+               "whitened_residual", "leverage"],
+              [[lab.instrument, lab.kind, lab.station, lab.stage or "", lab.component, lab.x, lab.y, measured[i],
+                f.x[i], residual[i], rel.whitened_residual[i], rel.leverage[i]] for i, lab in enumerate(res.data.labels)])
+    write_csv(out / "error_scales.csv", ERROR_SCALE_HEADER, error_scale_rows(rel))
+    write_csv(out / "iterations.csv", ["iteration", "mu", "J"] + names + ["accepted"],
+              [[h.k, h.mu, h.J] + list(h.p) + [h.accepted] for h in f.history])
+    if exploration is not None and exploration.field is not None:
+        write_field(exploration.field, out / "field.vtu")
+    if exploration is not None and getattr(exploration, "lining", None) is not None:
+        from geoback.reports.fields import write_lining
+
+        write_lining(exploration.lining, out, vtu=exploration.field is not None)
+    if exploration is not None and getattr(exploration, "plastic_zone", None) is not None:
+        from geoback.reports.fields import write_plastic_zone
+
+        write_plastic_zone(exploration.plastic_zone, out)
+    if res.forecasts is not None:
+        from geoback.reports.forecast_report import HEADER, forecast_rows
+
+        write_csv(out / "forecast.csv", HEADER, forecast_rows(res.forecasts))
+    if plots:
+        from geoback.reports.plots import plot_run
+
+        plot_run(res, exploration, out)
+    write_atomic(out / "report.md", report_text(res, exploration))
+    write_json(out / "summary.json", summary(res, exploration))

@@ -1,0 +1,110 @@
+"""The house: rooms by concept, dependencies pointing one way, no cycles, no private names across modules.
+
+The layer order (commands -> reports -> worth -> diagnosis -> inference -> physics -> observation -> case ->
+foundation) is an import-linter contract in ``pyproject.toml``; these tests run it and check what a
+layer contract cannot: cycles between modules of one room, private names taken across modules, and the
+public API (``docs/architecture.md``).
+"""
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import grimp
+import pytest
+
+pytestmark = pytest.mark.quick
+
+ROOT = Path(__file__).resolve().parents[1]
+SRC = ROOT / "src" / "geoback"
+
+
+def test_layers_point_one_way():
+    """import-linter's layer contract over the whole package (the rooms' order), as `lint-imports` runs it."""
+    run = subprocess.run([sys.executable, "-c", "import sys; from importlinter.cli import lint_imports_command;"
+                          " sys.exit(lint_imports_command())"], cwd=ROOT, capture_output=True, text=True)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:]
+    assert "1 kept, 0 broken" in run.stdout
+
+
+def _cycles(graph) -> list[list[str]]:
+    """Strongly connected components of more than one module (Tarjan), lazy imports included."""
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+    modules = sorted(graph.modules)
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in sorted(graph.find_modules_directly_imported_by(v)):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
+    for v in modules:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_cycles():
+    """No module imports, directly or through others, a module that imports it back (package faces
+    that only hand names on are modules too)."""
+    graph = grimp.build_graph("geoback", cache_dir=None)
+    assert _cycles(graph) == []
+    # the detector itself: one import back from the case to the commands closes a loop it must find
+    graph.add_import(importer="geoback.case.loading", imported="geoback.commands.cli")
+    assert any("geoback.commands.cli" in c and "geoback.case.loading" in c for c in _cycles(graph))
+
+
+def _private_imports() -> list[str]:
+    found = []
+    for path in sorted(SRC.rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("geoback"):
+                for alias in node.names:
+                    if alias.name.startswith("_") and not alias.name.startswith("__"):
+                        found.append(f"{path.relative_to(ROOT)}:{node.lineno}: {node.module}.{alias.name}")
+    return found
+
+
+def test_no_private_name_imported_across_modules():
+    assert _private_imports() == []
+
+
+def test_every_room_is_a_package_with_a_docstring():
+    rooms = sorted(p.parent.name for p in SRC.glob("*/__init__.py"))
+    assert rooms == ["case", "commands", "diagnosis", "inference", "observation", "physics", "reports", "worth"]
+    for room in rooms:
+        doc = ast.get_docstring(ast.parse((SRC / room / "__init__.py").read_text()))
+        assert doc and len(doc) > 40, room
+    loose = sorted(p.name for p in SRC.glob("*.py"))
+    assert loose == ["__init__.py", "errors.py", "outputs.py"]  # the foundation, below every room
+
+
+def test_public_api_visible_to_dir_and_tab_completion():
+    import geoback
+
+    names = dir(geoback)
+    for name in ("load_case", "prepare", "identify", "diagnose", "forecast", "design", "fit_report"):
+        assert name in names
+        assert callable(getattr(geoback, name))
+    with pytest.raises(AttributeError):
+        geoback.no_such_thing  # noqa: B018
