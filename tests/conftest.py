@@ -20,19 +20,17 @@ settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "reproducible"))
 
 
-# The quick tier (`pytest -m quick`, under 90 s) for the edit-test loop: the numerical core
-# (covariances, solver, FE model, sensitivities, the seam, identification, instruments, reliability).
-# The default suite (`pytest`, what CI runs) adds the commands, figures, diagnosis, studies and
-# bad-input tests; `pytest -m slow` the long verification runs.
-QUICK_MODULES = {"test_covariance", "test_solver", "test_fem", "test_instruments", "test_identify",
-                 "test_sensitivity_extensions", "test_seam", "test_staged", "test_plastic"}
-
-
+# Tiers: `pytest -m quick` (under 90 s) for the edit-test loop, declared in each test module by
+# `pytestmark = pytest.mark.quick` (the numerical core: covariances, solver, FE model, sensitivities,
+# the seam, identification, instruments, the house's layout); `pytest` (what CI runs) adds the
+# commands, figures, diagnosis, studies and bad-input tests; `pytest -m slow` the long verification runs.
 def pytest_collection_modifyitems(config, items):
-    for item in items:
-        module = item.module.__name__.rsplit(".", 1)[-1] if item.module else ""
-        if module in QUICK_MODULES and not item.get_closest_marker("slow"):
-            item.add_marker(pytest.mark.quick)
+    for item in items:  # a slow test is never in the quick tier
+        if item.get_closest_marker("slow") and item.get_closest_marker("quick"):
+            item.own_markers[:] = [m for m in item.own_markers if m.name != "quick"]
+            if item.get_closest_marker("quick"):
+                raise pytest.UsageError(f"{item.nodeid}: a module marked quick holds a slow test; mark the test, "
+                                        "not the module, or move it")
 
 
 @pytest.fixture

@@ -25,6 +25,8 @@ from geoback.case.covariance import (
     structure_matrix,
 )
 
+pytestmark = pytest.mark.quick  # the edit-test loop tier (`pytest -m quick`)
+
 UNEQUAL = np.array([0.5, 1.0, 0.5, 2.0, 1.0, 0.75])
 SIGMA = 0.7
 VARIANCES = {

@@ -169,3 +169,20 @@ def test_deep_rigid_stratum_is_a_tentative_answer():
     assert prof.low <= 30.0 <= prof.high
     assert d.open_ends("E[clay_below]") == (False, True)  # bounded below only
     assert "TENTATIVE" in verdict(d)
+
+
+def test_error_scales_example_names_the_instrument_and_refits_no_searched_boundary():
+    """The error-scales example (X1 read 3.5x less accurately than stated) scored with the scales at
+    their null estimates: the verdict is X1's stated sigma, no hypothesis is accepted and no layer
+    boundary is searched in depth (with a misfit that whitened by the stated C_x it was, at
+    p = 4.9e-5, and `diagnose` took 40x longer; tests/test_misfit_derived.py)."""
+    d = diagnose(load_case(CASES / "tunnel-paper-error-scales.yaml"))
+    assert d.accepted == []
+    assert all(r.accepted is None for r in d.rounds)
+    refitted = [s.hypothesis.key for r in d.rounds for s in r.ranking if s.refit is not None]
+    assert not any(k.startswith("layer-boundary") for k in refitted), refitted
+    assert d.rounds[0].threshold is not None
+    first = d.rounds[0]
+    scored = [s for s in first.ranking if s.collinear_with is None and not s.hypothesis.key.startswith("yielding")]
+    assert scored and all(s.p_score >= first.threshold for s in scored)
+    assert first.mismatches[0].instrument == "X1"

@@ -24,6 +24,8 @@ from geoback.physics.mesh import build_mesh
 from geoback.inference.identification import prepare
 from geoback.physics.solver import Factorisation, available_backends
 
+pytestmark = pytest.mark.quick  # the edit-test loop tier (`pytest -m quick`)
+
 
 # ---------------------------------------------------------------------------- helpers / fixtures
 @pytest.fixture(scope="module", autouse=True)

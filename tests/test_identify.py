@@ -11,6 +11,8 @@ from geoback.inference.estimate import fit
 from geoback.inference.identification import identify, prepare
 from geoback.commands.run import run_case
 
+pytestmark = pytest.mark.quick  # the edit-test loop tier (`pytest -m quick`)
+
 
 @pytest.fixture(scope="module")
 def paper_problem():

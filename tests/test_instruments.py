@@ -11,6 +11,9 @@ from conftest import CASES
 from geoback.case import covariance as cov
 from geoback.case.loading import LoadedCase, case_from_data
 from geoback.inference.identification import prepare
+import pytest
+
+pytestmark = pytest.mark.quick  # the edit-test loop tier (`pytest -m quick`)
 
 
 def _paper():

@@ -29,6 +29,8 @@ from geoback.physics.plastic import PlasticSimulation
 from geoback.physics.plasticity import Options
 from geoback.physics.factory import make_simulation
 
+pytestmark = pytest.mark.quick  # the edit-test loop tier (`pytest -m quick`)
+
 
 def case_data(**layer) -> dict:
     ground = {"name": "marl", "top": 0.0, "E": "40 MPa", "nu": 0.3, "model": "mohr-coulomb", "c": 50.0,

@@ -10,6 +10,8 @@ from geoback.inference.explore import explore
 from geoback.inference.identification import identify, prepare
 from geoback.reports.report import write_run
 
+pytestmark = pytest.mark.quick  # the edit-test loop tier (`pytest -m quick`)
+
 
 @pytest.fixture(scope="module")
 def paper():

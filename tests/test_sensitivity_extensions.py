@@ -9,6 +9,8 @@ from geoback.case.loading import LoadedCase, case_from_data
 from geoback.physics.ground import plane_strain_cross_anisotropic, plane_strain_isotropic
 from geoback.inference.identification import prepare
 
+pytestmark = pytest.mark.quick  # the edit-test loop tier (`pytest -m quick`)
+
 
 @pytest.fixture(scope="module")
 def problem():

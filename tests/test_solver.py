@@ -5,6 +5,8 @@ import scipy.sparse as sp
 
 from geoback.physics.solver import MAX_BASIS, Factorisation, available_backends
 
+pytestmark = pytest.mark.quick  # the edit-test loop tier (`pytest -m quick`)
+
 
 def _spd(n=400, seed=0):
     rng = np.random.default_rng(seed)

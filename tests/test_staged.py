@@ -32,6 +32,8 @@ from geoback.physics.factory import make_simulation
 from geoback.physics.staged import StagedSimulation
 from lined_tunnel import LinedTunnel, ccm, check_michell, support_stiffness
 
+pytestmark = pytest.mark.quick  # the edit-test loop tier (`pytest -m quick`)
+
 # ---------------------------------------------------------------------------- the deep tunnel
 R, T, Z0, E_G, NU_G, NU_L, GAMMA = 1.0, 0.1, 40.0, 1e5, 0.3, 0.2, 20.0
 
