@@ -33,6 +33,12 @@ app()
 """
 
 
+# A guard against hangs only. Tests assert no wall-clock time (the machine may be busy: time is
+# measured in benchmarks/, e.g. benchmarks/command_times.py); they bound work by counts (bytes,
+# factorisations, iterations) and catch a hang with this generous limit.
+HANG_SECONDS = 120.0
+
+
 @dataclass
 class Measured:
     returncode: int

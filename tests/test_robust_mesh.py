@@ -119,7 +119,6 @@ def test_every_command_refuses_and_allow_large_lifts(command, tmp_path, small_li
     assert "DOFs" in refused.stderr and "pass --allow-large" in refused.stderr, refused.stderr
     assert refused.stderr.startswith(f"error: {PAPER}:"), refused.stderr
     assert not list(tmp_path.glob("*/")), "a refused command wrote results"
-    assert refused.seconds < 5
     allowed = run_cli(args[:1] + [PAPER, "--allow-large"] + args[1:], tmp_path, env=small_limit_env)
     assert allowed.returncode in (0, 1), allowed.stderr  # run/diagnose: 1 = not converged / not adequate
     assert "Traceback" not in allowed.stderr
@@ -145,16 +144,16 @@ def test_refine_is_guarded_where_meshing_happens(tmp_path, small_limit_env):
                                   dict(size_tunnel=0.07, size_far=0.5),  # just under VALIDATE_MESH_DOFS
                                   dict(size_tunnel=0.04, size_far=0.16)],  # just under the default limit
                          ids=["paper", "built", "stand-in"])
-def test_validate_within_5_s_and_500_MB(mesh, tmp_path):
-    """Cold cache, fresh interpreter: whatever validate accepts by default costs at most 5 s and
-    500 MB (meshes above VALIDATE_MESH_DOFS are checked on a coarse stand-in)."""
+def test_validate_within_500_MB(mesh, tmp_path):
+    """Cold cache, fresh interpreter: whatever validate accepts by default costs at most 500 MB
+    (meshes above VALIDATE_MESH_DOFS are checked on a coarse stand-in, not built; its time is
+    measured by benchmarks/command_times.py, not asserted here)."""
     path = _case(tmp_path, "case.yaml", **mesh)
     est = meshsize.estimate(mesh_inputs(load_case(path).case))
     assert est.dofs <= meshsize.max_dofs()
     env = dict(os.environ, GEOBACK_CACHE=str(tmp_path / "cache"))
     proc = run_cli(["validate", path], tmp_path, env=env)
     assert proc.returncode == 0, proc.stderr
-    assert proc.seconds < 5.0, f"{proc.seconds:.1f} s"
     assert not proc.peak_bytes > 500e6, f"{proc.peak_bytes / 1e6:.0f} MB"
     built = est.dofs <= VALIDATE_MESH_DOFS
     assert ("not built by validate" in proc.stdout) != built, proc.stdout

@@ -68,7 +68,6 @@ def test_bad_out_refused_before_any_work(command, tmp_path, env):
         assert len(lines) == 1 and lines[0].startswith("error: --out") and words in lines[0], f"{label}: {proc.stderr}"
         assert "Traceback" not in proc.stderr
         assert not (tmp_path / "cache").exists(), f"{label}: meshed before refusing"
-        assert proc.seconds < 3, f"{label}: {proc.seconds:.1f} s"
     assert sorted(p.name for p in work.iterdir()) == []
 
 

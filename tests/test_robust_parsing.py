@@ -8,13 +8,12 @@ import tracemalloc
 from pathlib import Path
 
 import pytest
-import yaml
 
 from geoback.case import yamlmarks
 from geoback.case.loading import load_case
 from geoback.errors import CaseError
 from geoback.case.yamlmarks import parse_yaml_with_marks
-from measure import run_cli
+from measure import HANG_SECONDS, run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "cases" / "tunnel-paper.yaml"
@@ -39,14 +38,14 @@ def merge_bomb(levels: int) -> str:
 
 
 def refused_quickly(text: str, tmp_path: Path, name: str = "bomb.yaml") -> CaseError:
-    """Refused within a second, allocating under 30 MB, with a located 'expected ... found' message."""
+    """Refused without expanding (allocating under 30 MB; no hang), with a located 'expected ... found' message."""
     path = tmp_path / name
     path.write_text(text, encoding="utf-8")
     t0 = time.perf_counter()
     with pytest.raises(CaseError) as info:
         load_case(path)
     seconds = time.perf_counter() - t0
-    assert seconds < 1.0, f"took {seconds:.2f} s"
+    assert seconds < HANG_SECONDS, f"hung: {seconds:.0f} s"
     tracemalloc.start()  # (slows Python down: timed above, without it)
     try:
         with pytest.raises(CaseError):
@@ -96,23 +95,26 @@ def test_too_many_values(tmp_path):
 def test_huge_file_is_refused_before_parsing(tmp_path):
     path = tmp_path / "huge.yaml"
     with open(path, "w") as fh:
-        fh.write("name: x\n# " + "c" * (yamlmarks.MAX_BYTES + 10) + "\n")
-    t0 = time.perf_counter()
-    with pytest.raises(CaseError) as info:
-        load_case(path)
-    assert time.perf_counter() - t0 < 1.0
+        fh.write("name: x\n# " + "c" * (4 * yamlmarks.MAX_BYTES) + "\n")  # read up to the limit only
+    tracemalloc.start()
+    try:
+        with pytest.raises(CaseError) as info:
+            load_case(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < yamlmarks.MAX_BYTES + 1e6, f"allocated {peak / 1e6:.0f} MB for a file it refuses by its size"
     assert str(info.value).startswith(f"{path}: expected a case file of at most")
 
 
 def test_alias_bomb_through_the_cli(tmp_path):
-    """The real command: refused in well under a second and a few MB beyond the interpreter."""
+    """The real command: refused with a few MB beyond the interpreter (the time: benchmarks/command_times.py)."""
     path = tmp_path / "bomb.yaml"
     path.write_text(alias_bomb(9), encoding="utf-8")
     run = run_cli(["validate", path], tmp_path)
     assert run.returncode == 2, run.stderr
     assert run.stderr.startswith(f"error: {path}:1:"), run.stderr
     assert "Traceback" not in run.stderr
-    assert run.seconds < 3.0, run.seconds  # mostly the interpreter starting
     assert not run.peak_bytes > 150e6, f"{run.peak_bytes / 1e6:.0f} MB"
 
 
@@ -149,7 +151,22 @@ parameters:
 
 def test_merge_keys_and_aliases_work(tmp_path):
     data, marks = parse_yaml_with_marks(MERGED, "m.yaml")
-    assert data == yaml.safe_load(MERGED)  # the same data as plain YAML, merge keys included
+    # the YAML merge-key specification (yaml.org/type/merge): keys written in the mapping override
+    # merged ones, and in a sequence of merged mappings the earlier one wins (`<<: [{name: X3}, *X1]`
+    # gives X3). Written out here, not taken from a YAML library: PyYAML 6.0.4 resolves that
+    # sequence to X1, 6.0.2 to X3; the reference is the specification, not a library version.
+    x1 = {"name": "X1", "kind": "extensometer", "start": [0.0, 0.0], "end": [0.0, -6.5], "spacing": 1.25,
+          "stations": 5, "sigma": 0.0005, "var_a": 1.0e-6}
+    assert data == {
+        "name": "merged",
+        "geometry": {"radius": 3.0, "axis_depth": 10.0, "width": 40.0, "depth": 30.0},
+        "ground": {"unit_weight": 20.0, "K0": 1.0,
+                   "layers": [{"name": "clay", "top": 0.0, "E": "10 MPa", "nu": 0.49}]},
+        "mesh": {"size_tunnel": 0.4, "size_far": 4.0},
+        "instruments": [x1, {**x1, "name": "X2", "sigma": 0.001, "end": [2.0, -6.5]},
+                        {**x1, "name": "X3", "end": [4.0, -6.5]}],
+        "parameters": [{"name": "E", "initial": "5 MPa", "bounds": [100, "1.0e6"]}],  # YAML 1.1: no exponent sign, a string
+    }
     x1, x2, x3 = data["instruments"]
     assert x1["sigma"] == 0.0005 and x2["sigma"] == 0.001 and x2["stations"] == 5
     assert x3["name"] == "X3" and x3["end"] == [4.0, -6.5] and x3["sigma"] == 0.0005

@@ -8,6 +8,7 @@ the extensions stay linear-elastic and are differentiated like the baseline (eqn
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -34,99 +35,236 @@ class Hypothesis:
         return cause_of(self.kind)
 
 
-KINDS = {
-    "stiffness-gradient": "modulus increasing linearly with depth",
-    "layer-boundary": "a layer boundary with a different modulus below it",
-    "anisotropy": "cross-anisotropic stiffness (horizontal modulus differs from vertical)",
-    "K0-gradient": "K0 varying with depth",
-    "integration-constant": "a linewise instrument's reference end moved (integration constant not zero)",
-    "stress-release": "only part of the initial stress released before support (beta < 1)",
-    "bias-shift": "an inclinometer's readings carry a constant slope offset (error growing along the casing)",
-    "depth-offset": "an inclinometer's probe was read at depths shifted from those recorded",
-    "release-before-lining": "more (or less) stress released before the lining than assumed",
-    "lining-stiffness": "a stiffer or softer lining than assumed",
-}
+@dataclass(frozen=True)
+class Context:
+    """What every row of the catalogue proposes from: the fitted model (its case, named values at
+    the fit, the parameters it already has) and its survey."""
 
-# What a kind of hypothesis blames: the instruments (their reference, their systematic errors) or the
-# ground model. A kind not listed here is ground physics.
-INSTRUMENT_KINDS = frozenset({"integration-constant", "bias-shift", "depth-offset"})
-CAUSES = {"instrument": "instrument error", "ground": "ground physics"}
+    misfit: object
+    case: object
+    values: dict
+    baseline: frozenset
+
+    @classmethod
+    def of(cls, misfit, p_hat: np.ndarray) -> "Context":
+        return cls(misfit, misfit.simulation.loaded.case, misfit.values(p_hat), frozenset(misfit.parameters.names))
+
+    @property
+    def tops(self) -> list[float]:
+        """Layer tops and the model's bottom."""
+        return [layer.top for layer in self.case.ground.layers] + [self.case.geometry.depth]
+
+    def instruments(self) -> list:
+        """One block per instrument (an instrument read at several stages: its first survey)."""
+        return list({b.name: b for b in self.misfit.data.blocks}.values())
 
 
-def cause_of(kind: str) -> str:
-    """'instrument' or 'ground' (see ``INSTRUMENT_KINDS``)."""
-    return "instrument" if kind in INSTRUMENT_KINDS else "ground"
+@dataclass(frozen=True)
+class Kind:
+    """One row of the catalogue: a kind of thing the model may lack.
+
+    key: its name in reports and diagnosis.json; meaning: what it is, in words; cause: 'ground'
+    (physics the ground model lacks) or 'instrument' (an error of an instrument: its reference,
+    its systematic errors); propose: the hypotheses of this kind that apply to a fitted model,
+    with null values at the fit (None: proposed by a screen of its own and tested by a refit only,
+    as yielding is in ``yielding.py``)."""
+
+    key: str
+    meaning: str
+    cause: str
+    propose: Callable[[Context], list[Hypothesis]] | None
 
 
 def _param(name: str, initial: float, lo: float, hi: float) -> Parameter:
     return Parameter(name=name, initial=initial, bounds=(lo, hi))
 
 
-def candidate_hypotheses(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
-    """Every extension that applies to the misfit's model, with null values taken at its fit p_hat."""
-    case = misfit.simulation.loaded.case
-    values = misfit.values(p_hat)
-    out: list[Hypothesis] = []
-    tops = [layer.top for layer in case.ground.layers] + [case.geometry.depth]
-    baseline = set(misfit.parameters.names)
-    R, zc = case.geometry.radius, case.geometry.axis_depth
-    for i, layer in enumerate(case.ground.layers):
-        name = layer.name
-        E = values[f"E[{name}]"]
-        thick = tops[i + 1] - tops[i]
-        if f"Egrad[{name}]" not in baseline:
-            g_max = 20 * E / max(thick, 1.0)
+def _layers(ctx: Context):
+    """(layer name, its modulus at the fit, its thickness, its top, its bottom) of every layer."""
+    tops = ctx.tops
+    for i, layer in enumerate(ctx.case.ground.layers):
+        yield layer.name, ctx.values[f"E[{layer.name}]"], tops[i + 1] - tops[i], tops[i], tops[i + 1]
+
+
+def _stiffness_gradient(ctx: Context) -> list[Hypothesis]:
+    out = []
+    for name, E, thick, _, _ in _layers(ctx):
+        if f"Egrad[{name}]" not in ctx.baseline:
             out.append(Hypothesis(
                 f"stiffness-gradient[{name}]", "stiffness-gradient", f"modulus of '{name}' increasing with depth",
                 f"E in layer '{name}' grows linearly with depth below its top (E = E_top + Egrad * (depth - top)).",
-                [_param(f"Egrad[{name}]", 0.0, -E / max(thick, 1.0) * 0.9, g_max)]))
-        if f"n[{name}]" not in baseline:
+                [_param(f"Egrad[{name}]", 0.0, -E / max(thick, 1.0) * 0.9, 20 * E / max(thick, 1.0))]))
+    return out
+
+
+def _anisotropy(ctx: Context) -> list[Hypothesis]:
+    return [Hypothesis(
+        f"anisotropy[{name}]", "anisotropy", f"cross-anisotropic stiffness in '{name}'",
+        f"The horizontal modulus of '{name}' differs from the vertical one (E_h = n E_v; G_vh = E_v / (2 (1 + nu))).",
+        [_param(f"n[{name}]", 1.0, 0.2, 5.0)]) for name, *_ in _layers(ctx) if f"n[{name}]" not in ctx.baseline]
+
+
+def _layer_boundary(ctx: Context) -> list[Hypothesis]:
+    """Candidate boundary depths: within the layer, away from its edges, a grid of ~R/2 (a group:
+    the depths of one layer are alternatives, refined by ``boundary.py``)."""
+    out = []
+    step = max(0.5, ctx.case.geometry.radius / 2)
+    for name, E, _, top, bottom in _layers(ctx):
+        for z in np.arange(top + step, bottom - step / 2, step):
             out.append(Hypothesis(
-                f"anisotropy[{name}]", "anisotropy", f"cross-anisotropic stiffness in '{name}'",
-                f"The horizontal modulus of '{name}' differs from the vertical one (E_h = n E_v; "
-                f"G_vh = E_v / (2 (1 + nu))).",
-                [_param(f"n[{name}]", 1.0, 0.2, 5.0)]))
-        # candidate boundary depths: within the layer, away from its edges, a grid of ~R/2
-        step = max(0.5, R / 2)
-        depths = np.arange(tops[i] + step, tops[i + 1] - step / 2, step)
-        for z in depths:
-            out.append(Hypothesis(
-                f"layer-boundary[{name}@{z:g}]", "layer-boundary",
-                f"a stiffer or softer stratum below {z:g} m in '{name}'",
+                f"layer-boundary[{name}@{z:g}]", "layer-boundary", f"a stiffer or softer stratum below {z:g} m in '{name}'",
                 f"Below {z:g} m depth the ground of '{name}' has another modulus (an unmodelled layer boundary).",
                 [_param(f"Esplit[{name}]", E, E / 20, E * 20)], {f"zsplit[{name}]": float(z)},
                 group=f"layer-boundary[{name}]"))
-    if "K0grad" not in baseline:
-        out.append(Hypothesis(
-            "K0-gradient", "K0-gradient", "K0 varying with depth",
-            f"K0 changes linearly with depth (K0 = K0_axis + K0grad * (depth - {zc:g} m)).",
-            [_param("K0grad", 0.0, -0.5, 0.5)]))
-    if case.construction is not None:
-        out += _construction_hypotheses(case, values, baseline)
-    elif "beta" not in baseline:  # staged cases model the release before support explicitly
-        out.append(Hypothesis(
-            "stress-release", "stress-release", "partial stress release before support",
-            "Only a fraction beta of the initial stress on the tunnel wall was released by the excavation.",
-            [_param("beta", 1.0, 0.05, 1.5)]))
-    constants: dict[str, list[str]] = {}  # an instrument read at several stages: every survey's constants
-    for block in misfit.data.blocks:
-        constants.setdefault(block.name, []).extend(block.constant_names)
-    errors = set(misfit.simulation.survey.error_names)
-    if not getattr(misfit.simulation, "reads_depth_offsets", False):
-        errors = {n for n in errors if not n.startswith("zoff[")}
-    for block in {b.name: b for b in misfit.data.blocks}.values():
-        out += _instrument_error_hypotheses(block, case, errors - baseline)
-        names = [n for n in constants[block.name] if n not in baseline]
-        if not names:
-            continue
-        what = {"inclinometer": "toe (or head) moved", "sliding_micrometer": "anchor moved",
-                "extensometer": "anchor moved", "deflectometer": "reference end moved and rotated"}[block.kind]
-        out.append(Hypothesis(
-            f"integration-constant[{block.name}]", "integration-constant", f"{block.kind} {block.name}: {what}",
-            f"The reference end of {block.kind} '{block.name}' was assumed fixed but moved "
-            f"(integration constant{'s' if len(names) > 1 else ''} {', '.join(names)} of eqns 11/15/18).",
-            [_param(n, 0.0, -1.0, 1.0) for n in names]))
     return out
+
+
+def _k0_gradient(ctx: Context) -> list[Hypothesis]:
+    if "K0grad" in ctx.baseline:
+        return []
+    zc = ctx.case.geometry.axis_depth
+    return [Hypothesis("K0-gradient", "K0-gradient", "K0 varying with depth",
+                       f"K0 changes linearly with depth (K0 = K0_axis + K0grad * (depth - {zc:g} m)).",
+                       [_param("K0grad", 0.0, -0.5, 0.5)])]
+
+
+def _stress_release(ctx: Context) -> list[Hypothesis]:
+    """One-step models only: staged cases model the release before support explicitly."""
+    if ctx.case.construction is not None or "beta" in ctx.baseline:
+        return []
+    return [Hypothesis("stress-release", "stress-release", "partial stress release before support",
+                       "Only a fraction beta of the initial stress on the tunnel wall was released by the excavation.",
+                       [_param("beta", 1.0, 0.05, 1.5)])]
+
+
+def _staged_plan(ctx: Context):
+    from geoback.case.construction import StagePlan
+
+    if ctx.case.construction is None:
+        return None
+    plan = StagePlan.of(ctx.case)
+    return plan if plan.lining is not None else None
+
+
+def _release_before_lining(ctx: Context) -> list[Hypothesis]:
+    """The release before the lining acts (the convergence-confinement beta), free from its assumed value."""
+    plan = _staged_plan(ctx)
+    name = plan.last_release_before_lining() if plan is not None else None
+    if name is None or name in ctx.baseline:
+        return []
+    beta = float(ctx.values[name])
+    later = [float(ctx.values[r]) for r, lined in zip(plan.release, plan.lined) if r is not None and lined]
+    return [Hypothesis(
+        "release-before-lining", "release-before-lining", "more or less stress released before the lining than assumed",
+        f"The ground took another fraction of the in-situ stress than the assumed {beta:g} before the lining "
+        f"'{plan.lining_name}' acted ({name}: the face was further or nearer, the lining later or earlier).",
+        [_param(name, beta, 0.02, later[0] if later else 1.0)])]
+
+
+def _lining_stiffness(ctx: Context) -> list[Hypothesis]:
+    plan = _staged_plan(ctx)
+    if plan is None or f"E[{plan.lining_name}]" in ctx.baseline:
+        return []
+    E = f"E[{plan.lining_name}]"
+    El = float(ctx.values[E])
+    return [Hypothesis(
+        "lining-stiffness", "lining-stiffness", "a stiffer or softer lining than assumed",
+        f"The lining '{plan.lining_name}' is stiffer or softer than its assumed E = {El:.4g} kPa (young or "
+        f"cracked shotcrete, joints between segments, another thickness).",
+        [_param(E, El, El / 50, El * 50)])]
+
+
+def _error_names(ctx: Context) -> set:
+    """The survey's systematic-error terms the model can take and does not already have."""
+    errors = set(ctx.misfit.simulation.survey.error_names)
+    if not getattr(ctx.misfit.simulation, "reads_depth_offsets", False):
+        errors = {n for n in errors if not n.startswith("zoff[")}
+    return errors - ctx.baseline
+
+
+def _bias_shift(ctx: Context) -> list[Hypothesis]:
+    available, out = _error_names(ctx), []
+    for block in ctx.instruments():
+        bias = f"bias[{block.name}]"
+        if bias in available:
+            out.append(Hypothesis(
+                f"bias-shift[{block.name}]", "bias-shift", f"inclinometer {block.name}: bias shift",
+                f"Every reading of inclinometer '{block.name}' carries the same slope offset (a probe bias shift "
+                f"between surveys), so its displacements are in error by bias x the distance from the "
+                f"{block.reference_end}, growing along the casing.",
+                [_param(bias, 0.0, -0.01, 0.01)]))
+    return out
+
+
+def _depth_offset(ctx: Context) -> list[Hypothesis]:
+    available, out = _error_names(ctx), []
+    for block in ctx.instruments():
+        zoff = f"zoff[{block.name}]"
+        if zoff in available:
+            lo, hi = depth_offset_range(block, ctx.case)
+            if hi - lo > 0.05:
+                out.append(Hypothesis(
+                    f"depth-offset[{block.name}]", "depth-offset", f"inclinometer {block.name}: depth offset",
+                    f"The probe of inclinometer '{block.name}' was read at depths shifted from those recorded "
+                    f"(zoff > 0: deeper), so each reading is the movement at another depth.",
+                    [_param(zoff, 0.0, lo, hi)]))
+    return out
+
+
+def _integration_constant(ctx: Context) -> list[Hypothesis]:
+    """A linewise instrument's reference end moved: its integration constants (eqns 11, 15, 18), every
+    survey's when it was read at several stages."""
+    constants: dict[str, list[str]] = {}
+    for block in ctx.misfit.data.blocks:
+        constants.setdefault(block.name, []).extend(block.constant_names)
+    out = []
+    for block in ctx.instruments():
+        names = [n for n in constants[block.name] if n not in ctx.baseline]
+        if names:
+            out.append(Hypothesis(
+                f"integration-constant[{block.name}]", "integration-constant",
+                f"{block.kind} {block.name}: {block.reference_end_moved}",
+                f"The reference end of {block.kind} '{block.name}' was assumed fixed but moved "
+                f"(integration constant{'s' if len(names) > 1 else ''} {', '.join(names)} of eqns 11/15/18).",
+                [_param(n, 0.0, -1.0, 1.0) for n in names]))
+    return out
+
+
+# The catalogue: one kind a row. Adding a hypothesis is adding a row (and, for new physics, its
+# extension in ``physics/extensions.py``); the order is the order hypotheses are proposed in.
+CATALOGUE: tuple[Kind, ...] = (
+    Kind("stiffness-gradient", "modulus increasing linearly with depth", "ground", _stiffness_gradient),
+    Kind("anisotropy", "cross-anisotropic stiffness (horizontal modulus differs from vertical)", "ground", _anisotropy),
+    Kind("layer-boundary", "a layer boundary with a different modulus below it", "ground", _layer_boundary),
+    Kind("K0-gradient", "K0 varying with depth", "ground", _k0_gradient),
+    Kind("stress-release", "only part of the initial stress released before support (beta < 1)", "ground",
+         _stress_release),
+    Kind("release-before-lining", "more (or less) stress released before the lining than assumed", "ground",
+         _release_before_lining),
+    Kind("lining-stiffness", "a stiffer or softer lining than assumed", "ground", _lining_stiffness),
+    Kind("yielding", "the ground yields around the tunnel (Mohr-Coulomb plastic zone)", "ground", None),
+    Kind("bias-shift", "an inclinometer's readings carry a constant slope offset (error growing along the casing)",
+         "instrument", _bias_shift),
+    Kind("depth-offset", "an inclinometer's probe was read at depths shifted from those recorded", "instrument",
+         _depth_offset),
+    Kind("integration-constant", "a linewise instrument's reference end moved (integration constant not zero)",
+         "instrument", _integration_constant),
+)
+KINDS = {k.key: k.meaning for k in CATALOGUE}
+INSTRUMENT_KINDS = frozenset(k.key for k in CATALOGUE if k.cause == "instrument")
+CAUSES = {"instrument": "instrument error", "ground": "ground physics"}
+
+
+def cause_of(kind: str) -> str:
+    """'instrument' or 'ground': the cause class of a kind (its row of ``CATALOGUE``)."""
+    return "instrument" if kind in INSTRUMENT_KINDS else "ground"
+
+
+def candidate_hypotheses(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
+    """Every extension that applies to the misfit's model, with null values taken at its fit p_hat:
+    the catalogue's rows in order, each proposing what applies."""
+    ctx = Context.of(misfit, p_hat)
+    return [h for kind in CATALOGUE if kind.propose is not None for h in kind.propose(ctx)]
 
 
 MAX_DEPTH_OFFSET = 2.0  # m: larger depth offsets are searched for no further
@@ -150,57 +288,3 @@ def depth_offset_range(block, case) -> tuple[float, float]:
             elif y <= bottom:
                 lo = max(lo, y - bottom)
     return float(lo), float(hi)
-
-
-def _instrument_error_hypotheses(block, case, available: set) -> list[Hypothesis]:
-    """An inclinometer's systematic errors (instruments.ERROR_STEMS) as hypotheses."""
-    out = []
-    bias, zoff = f"bias[{block.name}]", f"zoff[{block.name}]"
-    end = "toe" if block.stations[0][1] < block.stations[-1][1] else "head"
-    if bias in available:
-        out.append(Hypothesis(
-            f"bias-shift[{block.name}]", "bias-shift", f"inclinometer {block.name}: bias shift",
-            f"Every reading of inclinometer '{block.name}' carries the same slope offset (a probe bias shift "
-            f"between surveys), so its displacements are in error by bias x the distance from the {end}, "
-            f"growing along the casing.",
-            [_param(bias, 0.0, -0.01, 0.01)]))
-    if zoff in available:
-        lo, hi = depth_offset_range(block, case)
-        if hi - lo > 0.05:
-            out.append(Hypothesis(
-                f"depth-offset[{block.name}]", "depth-offset", f"inclinometer {block.name}: depth offset",
-                f"The probe of inclinometer '{block.name}' was read at depths shifted from those recorded "
-                f"(zoff > 0: deeper), so each reading is the movement at another depth.",
-                [_param(zoff, 0.0, lo, hi)]))
-    return out
-
-
-def _construction_hypotheses(case, values: dict, baseline: set) -> list[Hypothesis]:
-    """Staged construction with a lining: the release before the lining acts (the CCM's beta) and
-    the lining's stiffness, each free from its assumed value."""
-    from geoback.case.construction import StagePlan
-
-    plan = StagePlan.of(case)
-    out: list[Hypothesis] = []
-    if plan.lining is None:
-        return out
-    name = plan.last_release_before_lining()
-    if name is not None and name not in baseline:
-        beta = float(values[name])
-        later = [float(values[r]) for r, lined in zip(plan.release, plan.lined) if r is not None and lined]
-        stage = name[len("beta["):-1]
-        out.append(Hypothesis(
-            "release-before-lining", "release-before-lining",
-            "more or less stress released before the lining than assumed",
-            f"The ground took another fraction of the in-situ stress than the assumed {beta:g} before the lining "
-            f"'{plan.lining_name}' acted ({name}: the face was further or nearer, the lining later or earlier).",
-            [_param(name, beta, 0.02, later[0] if later else 1.0)]))
-    E = f"E[{plan.lining_name}]"
-    if E not in baseline:
-        El = float(values[E])
-        out.append(Hypothesis(
-            "lining-stiffness", "lining-stiffness", "a stiffer or softer lining than assumed",
-            f"The lining '{plan.lining_name}' is stiffer or softer than its assumed E = {El:.4g} kPa (young or "
-            f"cracked shotcrete, joints between segments, another thickness).",
-            [_param(E, El, El / 50, El * 50)]))
-    return out

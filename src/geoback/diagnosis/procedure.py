@@ -97,8 +97,7 @@ def locate(misfit: Misfit, res: Fit, rel: Reliability, alpha: float = 0.05) -> l
             before = ri[i0 - 1] if i0 > 0 else 0.0
             size = float(ri[i1] - before)
             where = _stretch(block, i0, i1)
-            what = {"inclinometer": "horizontal displacement", "deflectometer": "normal displacement"}.get(
-                block.kind, "displacement along the line")
+            what = block.measures
         else:
             size = float(ri[i0:i1 + 1].mean())
             labs = block.labels[i0:i1 + 1]
@@ -145,9 +144,7 @@ def _strongest_run(z: np.ndarray) -> tuple[int, int, float]:
 def _stretch(block, i0: int, i1: int) -> str:
     """Where intervals i0..i1 of a linewise instrument lie (interval k ends at station k)."""
     pts = block.stations
-    d = (pts[1] - pts[0]) / np.linalg.norm(pts[1] - pts[0]) if len(pts) > 1 else np.array([0.0, 1.0])
-    reference = pts[0] - d * block.lengths[0]
-    start = pts[i0 - 1] if i0 > 0 else reference
+    start = pts[i0 - 1] if i0 > 0 else block.reference
     end = pts[i1]
     if abs(start[0] - end[0]) < 1e-9:  # vertical line: depths
         a, b = sorted((abs(start[1]), abs(end[1])))

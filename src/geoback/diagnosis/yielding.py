@@ -43,7 +43,7 @@ from geoback.errors import ForwardFailure
 from geoback.physics.extensions import EXTENSIONS
 from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, lr_objective
 from geoback.diagnosis.results import Scored
-from geoback.diagnosis.hypotheses import KINDS, Hypothesis
+from geoback.diagnosis.hypotheses import Hypothesis
 
 PHI = 30.0  # degrees: friction angle of the refit (fixed)
 PSI = 0.0  # degrees: dilation angle of the refit (fixed; no volume change in shear)
@@ -55,7 +55,6 @@ START_FACTORS = (0.5, 1.0)  # ... and from half that cohesion: from the small zo
 STIFFNESS_TO_STRENGTH = 2000.0  # E / c of the weakest plausible ground
 SCREEN_RADIUS = 1.5  # elements whose centroid lies within this many radii of the tunnel axis
 
-KINDS.setdefault("yielding", "the ground yields around the tunnel (Mohr-Coulomb plastic zone)")
 
 
 def required_cohesion(sxx: np.ndarray, syy: np.ndarray, sxy: np.ndarray, phi_deg: float = PHI) -> np.ndarray:

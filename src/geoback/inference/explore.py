@@ -178,12 +178,9 @@ def profiles(sim, values: dict) -> dict[str, Profile]:
         stations = block.stations
         if block.integration is not None:
             s = np.cumsum(block.lengths)
-            d = (stations[-1] - stations[0]) / np.linalg.norm(stations[-1] - stations[0]) if len(stations) > 1 \
-                else np.array([0.0, -1.0])
-            start = stations[0] - s[0] * d
+            start, d, direction = block.reference, block.along, block.measured
             along = np.linspace(0.0, s[-1], LINE_POINTS)
             line = start[None] + along[:, None] * d[None]
-            direction = block.weights[0, 0]
 
             def at(stage):
                 u = sim.stage_displacements_at(values, np.vstack([line, start]), stage)

@@ -17,8 +17,28 @@ import scipy.sparse as sp
 from geoback.case import covariance as cov
 from geoback.case.loading import Case, LoadedCase
 
-LINEWISE = {"inclinometer": "inclinometer", "sliding_micrometer": "sliding_micrometer",
-            "extensometer": "sliding_micrometer", "deflectometer": "deflectometer"}
+
+
+@dataclass(frozen=True)
+class Linewise:
+    """What a kind of linewise instrument is, written once: its covariance structure (eqns 10-20,
+    ``case/covariance.py``), the component its readings carry, what they measure in words, the
+    unit of its primary readings, and what a moved reference end is called."""
+
+    structure: str
+    component: str
+    measures: str
+    primary_unit: str
+    anchor: str  # the reference end as a person names it ('' for an inclinometer: its toe or head)
+
+
+LINEWISE_KINDS = {
+    "inclinometer": Linewise("inclinometer", "ux", "horizontal displacement", "rad", ""),
+    "sliding_micrometer": Linewise("sliding_micrometer", "along", "displacement along the line", "m", "anchor"),
+    "extensometer": Linewise("sliding_micrometer", "along", "displacement along the line", "m", "anchor"),
+    "deflectometer": Linewise("deflectometer", "normal", "displacement normal to the line", "1/m", "reference end"),
+}
+LINEWISE = {kind: lw.structure for kind, lw in LINEWISE_KINDS.items()}
 CONSTANT_STEMS = ("A", "B", "C", "D")
 # Systematic errors of an inclinometer (named with the instrument: bias[I1], zoff[I1]); zero when not
 # identified. bias: a constant offset of every primary reading (slope, rad), so the integrated
@@ -63,6 +83,9 @@ class InstrumentBlock:
     reading_type: str = "displacement"
     relative: bool = False  # readings relative to the reference end: the last sampling point
     stage: str | None = None
+    along: np.ndarray | None = None  # linewise: unit direction along the line, away from the reference end
+    measured: np.ndarray | None = None  # linewise: the direction each reading measures (eqns 11, 15, 18)
+    reference_end: str = ""  # linewise, in words: 'toe' or 'head' (inclinometer), 'reference end' (others)
 
     @property
     def m(self) -> int:
@@ -73,6 +96,26 @@ class InstrumentBlock:
         """Where the readings are: the stations of a linewise instrument (without the reference end
         a relative instrument also samples), the points of the others."""
         return self.points[:self.m] if self.lengths is not None else self.points
+
+    @property
+    def reference(self) -> np.ndarray | None:
+        """Linewise: the reference end, the point the stations are counted from (station k lies
+        lengths[0] + ... + lengths[k] along the line from it)."""
+        if self.lengths is None:
+            return None
+        return self.points[0] - self.lengths[0] * self.along
+
+    @property
+    def reference_end_moved(self) -> str:
+        """What a non-zero integration constant means for this instrument, in words."""
+        if self.kind == "deflectometer":
+            return "reference end moved and rotated"
+        return f"{LINEWISE_KINDS[self.kind].anchor or self.reference_end} moved"
+
+    @property
+    def measures(self) -> str:
+        """Linewise: what each reading measures, in words ('horizontal displacement', ...)."""
+        return LINEWISE_KINDS[self.kind].measures
 
     def at(self, stage: str) -> "InstrumentBlock":
         """The same instrument read at construction stage `stage`."""
@@ -162,7 +205,7 @@ def build_block(ins, loaded: LoadedCase, index: int) -> InstrumentBlock:
     if relative:  # u(station) - u(reference end): movements relative to the end the readings start from
         w[:, m] = -direction
         pts = np.vstack([pts, start])
-    comp = {"inclinometer": "ux", "sliding_micrometer": "along", "deflectometer": "normal"}[lkind]
+    comp = LINEWISE_KINDS[kind].component
     labels = [Reading(ins.name, kind, i + 1, comp, *pts[i]) for i in range(m)]
     names = cov.constant_names(lkind)
     variances = {n: getattr(ins, f"var_{n.lower()}") for n in names}
@@ -171,7 +214,8 @@ def build_block(ins, loaded: LoadedCase, index: int) -> InstrumentBlock:
                            cov.constant_matrix(lkind, lengths), [f"{n}[{ins.name}]" for n in names],
                            lengths=lengths, integration=cov.integration_matrix(lkind, lengths),
                            constant_variances=variances, sigma=ins.sigma, reading_type=ins.reading_type,
-                           relative=relative)
+                           relative=relative, along=d, measured=direction,
+                           reference_end=ins.reference if kind == "inclinometer" else "reference end")
 
 
 def check_inside(case: Case, blocks: list[InstrumentBlock], loaded: LoadedCase) -> None:

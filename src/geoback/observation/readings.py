@@ -27,7 +27,7 @@ import numpy as np
 from geoback.case.loading import LoadedCase
 from geoback.case.schema import READING_UNITS
 from geoback.errors import CaseError
-from geoback.observation.instruments import InstrumentBlock
+from geoback.observation.instruments import LINEWISE_KINDS, InstrumentBlock
 
 COLUMNS = {  # header (lower case, unit removed) -> role
     "instrument": "instrument", "name": "instrument",
@@ -154,7 +154,7 @@ def _number(table: Table, line: int, text: str, what: str, fail) -> float:
 # ---------------------------------------------------------------------------------------- matching
 def _default_unit(block: InstrumentBlock) -> str:
     if block.reading_type == "primary":
-        return {"inclinometer": "rad", "deflectometer": "1/m"}.get(block.kind, "m")
+        return LINEWISE_KINDS[block.kind].primary_unit
     return "m"
 
 

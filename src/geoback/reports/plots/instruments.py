@@ -51,15 +51,13 @@ def instruments_figure(res, exploration=None, before: np.ndarray | None = None, 
         prof = profiles.get(block.name)
         chi2_lines = []
         if linewise:
-            w0 = block.weights[0, 0]  # the measured direction (the same at every station)
-            what = {"inclinometer": "horizontal displacement u_x", "deflectometer": "displacement normal to the line"
-                    }.get(block.kind, "displacement along the line")
+            w0 = block.measured  # the measured direction (the same at every station)
+            what = block.measures + (" u_x" if block.kind == "inclinometer" else "")
             what += f" ({direction_words(w0)})"
             if block.relative:
                 what = what.replace(" (", " relative to the reference end\n(", 1)
             st = block.stations
-            d = st[-1] - st[0] if len(st) > 1 else np.array([0.0, -1.0])
-            vertical = abs(d[1]) >= abs(d[0])
+            vertical = abs(block.along[1]) >= abs(block.along[0])
             coord = -st[:, 1] if vertical else st[:, 0]
             pair = (lambda v, c: (v, c)) if vertical else (lambda v, c: (c, v))
         for k, (blk, rows) in enumerate(group):
