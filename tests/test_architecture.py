@@ -108,3 +108,10 @@ def test_public_api_visible_to_dir_and_tab_completion():
         assert callable(getattr(geoback, name))
     with pytest.raises(AttributeError):
         geoback.no_such_thing  # noqa: B018
+
+
+def test_fit_report_of_the_public_api(paper_case_path):
+    import geoback
+
+    text = geoback.fit_report(geoback.identify(geoback.load_case(paper_case_path)))
+    assert "E[clay]" in text and "K0" in text
