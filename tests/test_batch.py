@@ -86,6 +86,7 @@ def test_batch_local_pool(local_batch, cases_dir):
         assert estimate(row, "K0") == pytest.approx(1.0, rel=0.05)
         assert float(row["reduced_chi2"]) >= 0 and float(row["seconds"]) > 0
         assert row["message"] == ""
+        assert float(row["std E[clay]"]) == pytest.approx(213, rel=0.05) and row["unit E[clay]"] == "kPa"
         assert (out / row["case"] / "summary.json").is_file()
         assert (out / row["case"] / "parameters.csv").is_file()
     assert broken["status"] == "error"
@@ -97,7 +98,7 @@ def test_batch_local_pool(local_batch, cases_dir):
 
 
 def estimate_missing(row: dict) -> bool:
-    fixed = {"case", "file", "status", "reduced_chi2", "seconds", "message"}
+    fixed = {"case", "file", "status", "reduced_chi2", "seconds", "message", "warnings"}
     return all(v == "" for k, v in row.items() if k not in fixed)
 
 
@@ -167,8 +168,15 @@ def test_summary_columns_are_the_union_of_parameters():
             {"case": "b", "file": "b.yaml", "status": "converged", "parameters": {"E": 2.0, "nu[clay]": 0.3},
              "reduced_chi2": 2.0, "seconds": 1.0, "message": ""}]
     header, table = summary_table(rows)
-    assert header == ["case", "file", "status", "E", "K0", "nu[clay]", "reduced_chi2", "seconds", "message"]
-    assert table[1][3:6] == [2.0, "", 0.3]
+    # issue 18: each parameter with its std and unit, and the warning codes (the rows above, as an
+    # older writer left them, have neither: those cells stay empty)
+    assert header == ["case", "file", "status", "E", "std E", "unit E", "K0", "std K0", "unit K0",
+                      "nu[clay]", "std nu[clay]", "unit nu[clay]", "warnings", "reduced_chi2", "seconds", "message"]
+    assert [table[1][header.index(n)] for n in ("E", "K0", "nu[clay]")] == [2.0, "", 0.3]
+    rows[0].update(std={"E": 0.1, "K0": 0.01}, units={"E": "kPa", "K0": "-"}, warnings=["at-bound", "not-determined"])
+    header, table = summary_table(rows)
+    assert table[0][3:9] == [1.0, 0.1, "kPa", 0.5, 0.01, "-"]
+    assert table[0][header.index("warnings")] == "at-bound not-determined"
 
 
 def test_run_batch_in_process_same_case_names(tmp_path, cache, monkeypatch):

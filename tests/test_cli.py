@@ -68,3 +68,45 @@ def test_schema_is_json_schema_of_the_case():
     schema = json.loads(out.stdout)
     assert schema["title"] == "geoback case"
     assert {"geometry", "ground", "instruments", "parameters"} <= set(schema["properties"])
+
+
+def test_version_and_case_insensitive_choices(tmp_path):
+    """issue 18: --version; --method and --format are choices, case-insensitive, listed in --help."""
+    from geoback import __version__
+
+    v = cli("--version", cwd=tmp_path)
+    assert v.returncode == 0 and v.stdout.strip() == f"geoback {__version__}"
+    h = cli("run", "--help", cwd=tmp_path)
+    assert "lm|lm-scaled|gn" in h.stdout
+    bad = cli("run", str(CASES / "tunnel-paper.yaml"), "--method", "newton", "--out", str(tmp_path / "r"), cwd=tmp_path)
+    assert bad.returncode == 2 and "newton" in bad.stderr and "Traceback" not in bad.stderr
+    c = cli("covariance", "--instrument", "Inclinometer", "--stations", "2", "--spacing", "1", "--sigma", "1",
+            "--format", "JSON", cwd=tmp_path)
+    assert c.returncode == 0, c.stderr
+    data = json.loads(c.stdout)
+    assert data["matrix"] == [[1.0, 1.0], [1.0, 2.0]] and "m²" in data["caption"]
+
+
+def test_covariance_of_points_and_a_bounded_size(tmp_path):
+    """issue 18: points and convergence have a covariance too; issue 23: a dense matrix too large to
+    hold is refused before it is allocated (was a MemoryError traceback)."""
+    c = cli("covariance", "--instrument", "points", "--stations", "3", "--sigma", "0.002", "--format", "csv",
+            cwd=tmp_path)
+    assert c.returncode == 0, c.stderr
+    rows = [list(map(float, line.split(","))) for line in c.stdout.split()]
+    assert rows == [[4e-06, 0.0, 0.0], [0.0, 4e-06, 0.0], [0.0, 0.0, 4e-06]]
+    big = cli("covariance", "--instrument", "inclinometer", "--stations", "100000", "--spacing", "1", "--sigma", "1",
+              cwd=tmp_path)
+    assert big.returncode == 2 and "expected at most" in big.stderr and "Traceback" not in big.stderr
+
+
+def test_json_on_every_command_with_results(tmp_path):
+    """issue 18: --json prints the command's result file on stdout, the final line on stderr."""
+    out = tmp_path / "sim"
+    s = cli("simulate", str(CASES / "tunnel-paper.yaml"), "--out", str(out), "--no-vtu", "--json", cwd=tmp_path)
+    assert s.returncode == 0, s.stderr
+    assert json.loads(s.stdout) == json.loads((out / "predicted.json").read_text())
+    d = cli("diagnose", str(CASES / "tunnel-paper.yaml"), "--out", str(tmp_path / "d"), "--no-plots", "--json",
+            cwd=tmp_path)
+    assert d.returncode == 0, d.stderr
+    assert json.loads(d.stdout)["case"] == "tunnel-paper"

@@ -34,7 +34,7 @@ from geoback.errors import GeobackError
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS",
                     "BLIS_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
 FIXED_COLUMNS = ("case", "file", "status")
-TAIL_COLUMNS = ("reduced_chi2", "seconds", "message")
+TAIL_COLUMNS = ("warnings", "reduced_chi2", "seconds", "message")  # warnings: the result's caveat codes
 CASE_SUFFIXES = (".yaml", ".yml")
 
 
@@ -138,7 +138,8 @@ def run_one(path: str, out_dir: str, name: str | None = None, in_worker: bool = 
         limit_threads()
     t0 = time.perf_counter()
     row = {"case": name or _safe(Path(path).stem), "file": path, "status": "error", "parameters": {},
-           "reduced_chi2": None, "seconds": None, "message": "", "out": out_dir}
+           "std": {}, "units": {}, "warnings": [], "reduced_chi2": None, "seconds": None, "message": "",
+           "out": out_dir}
     try:
         try:
             from threadpoolctl import threadpool_limits
@@ -157,6 +158,9 @@ def run_one(path: str, out_dir: str, name: str | None = None, in_worker: bool = 
         fit = res.fit
         row["status"] = fit.status
         row["parameters"] = {n: float(v) for n, v in zip(res.parameters.names, fit.p)}
+        row["std"] = {e.name: float(e.std) for e in res.estimates}
+        row["units"] = dict(zip(res.parameters.names, res.parameters.units))
+        row["warnings"] = sorted({c.code for c in res.caveats})
         row["reduced_chi2"] = float(res.reliability.reduced_chi2)
         if fit.status != "converged":
             row["message"] = fit.reason
@@ -167,8 +171,8 @@ def run_one(path: str, out_dir: str, name: str | None = None, in_worker: bool = 
 
 
 def _error_row(path: str, name: str, out_dir: str, exc: BaseException) -> dict:
-    return {"case": name, "file": path, "status": "error", "parameters": {}, "reduced_chi2": None,
-            "seconds": None, "message": _one_line(exc), "out": out_dir}
+    return {"case": name, "file": path, "status": "error", "parameters": {}, "std": {}, "units": {}, "warnings": [],
+            "reduced_chi2": None, "seconds": None, "message": _one_line(exc), "out": out_dir}
 
 
 def _run_pool(jobs: list[tuple], workers: int, report) -> list[dict]:
@@ -217,16 +221,20 @@ def _run_dask(jobs: list[tuple], scheduler: str, report) -> list[dict]:
 
 
 def summary_table(rows: list[dict]) -> tuple[list[str], list[list]]:
-    """Header and rows of summary.csv: parameter columns are the union, in order of appearance."""
+    """Header and rows of summary.csv: for every parameter (the union over the cases, in order of
+    appearance) its estimate, its linearised std ('std NAME') and its unit ('unit NAME'); then the
+    result's warning codes (space separated), chi^2/dof, seconds and the message."""
     names: list[str] = []
     for r in rows:
         for n in r["parameters"]:
             if n not in names:
                 names.append(n)
-    header = list(FIXED_COLUMNS) + names + list(TAIL_COLUMNS)
-    table = [[r["case"], r["file"], r["status"]] + [r["parameters"].get(n, "") for n in names] +
-             [r["reduced_chi2"] if r["reduced_chi2"] is not None else "",
-              r["seconds"] if r["seconds"] is not None else "", r["message"]] for r in rows]
+    header = list(FIXED_COLUMNS) + [c for n in names for c in (n, f"std {n}", f"unit {n}")] + list(TAIL_COLUMNS)
+    table = [[r["case"], r["file"], r["status"]]
+             + [c for n in names for c in (r["parameters"].get(n, ""), r.get("std", {}).get(n, ""),
+                                           r.get("units", {}).get(n, "") if n in r["parameters"] else "")]
+             + [" ".join(r.get("warnings", [])), r["reduced_chi2"] if r["reduced_chi2"] is not None else "",
+                r["seconds"] if r["seconds"] is not None else "", r["message"]] for r in rows]
     return header, table
 
 

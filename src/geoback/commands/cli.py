@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+from enum import Enum
 from functools import wraps
 from pathlib import Path
 from typing import Optional
@@ -18,6 +19,43 @@ from geoback.errors import GeobackError  # noqa: E402
 
 app = typer.Typer(add_completion=False, pretty_exceptions_enable=False, no_args_is_help=True, rich_markup_mode=None,
                   help="Maximum-likelihood back-analysis of tunnel and excavation instrumentation.")
+
+
+def _version(value: bool) -> None:
+    if value:
+        from geoback import __version__
+
+        typer.echo(f"geoback {__version__}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _main(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="print the version and exit")):
+    """Maximum-likelihood back-analysis of tunnel and excavation instrumentation."""
+
+
+class Method(str, Enum):
+    """The estimation method (paper eqns 27-30); case-insensitive on the command line."""
+
+    lm = "lm"
+    lm_scaled = "lm-scaled"
+    gn = "gn"
+
+
+class Format(str, Enum):
+    table = "table"
+    csv = "csv"
+    json = "json"
+
+
+def _json_option():
+    return typer.Option(False, "--json", help="print the result as JSON on stdout (the file this command writes; "
+                                              "progress and the final line go to stderr)")
+
+
+def _print_json(path: Path) -> None:
+    typer.echo(json.dumps(json.loads(Path(path).read_text())))
 
 
 def _err(message: str) -> None:
@@ -151,6 +189,7 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              seed: int = typer.Option(0, help="seed of the noise"),
              readings_out: Optional[str] = typer.Option(None, help="write study data: readings as a CSV usable as "
                                                         "readings_file (a finer mesh than the case's by default)"),
+             as_json: bool = _json_option(),
              allow_large: bool = _allow_large()):
     """Forward run: predicted readings and the field; or study data (--readings-out, --noise)."""
     out = _check_out(out)
@@ -183,8 +222,12 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
                                                                     else "; no noise")]
         write_readings_csv(loaded, readings, target, notes)
         count = sum(len(v) for sets in readings.values() for v in (sets.values() if staged else [sets]))
+        if as_json:
+            typer.echo(json.dumps({"file": str(target), "readings": {
+                name: ({s: list(map(float, v)) for s, v in sets.items()} if staged else list(map(float, sets)))
+                for name, sets in readings.items()}}))
         typer.echo(f"{count} readings ({used}; {mesh}"
-                   f"{', noise seed ' + str(seed) if noise else ''}) -> {target}")
+                   f"{', noise seed ' + str(seed) if noise else ''}) -> {target}", err=as_json)
         return
     if refine not in (None, 1.0):
         raise GeobackError("--refine applies to study data (--readings-out or --noise)")
@@ -195,9 +238,11 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
     values = {**analysis.values, **resolve_values(analysis.simulation, assignments)}
     res = run_simulation(analysis, folder, values=values, vtu=vtu and loaded.case.output.vtu)
     used = ", ".join(f"{k} = {v}" for k, v in assignments.items())
+    if as_json:
+        _print_json(folder / "predicted.json")
     typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs"
                f"{' with ' + used if used else ''} -> {folder}/predicted.csv"
-               + (", lining.csv, lining.png" if res.get("lining") is not None else ""))
+               + (", lining.csv, lining.png" if res.get("lining") is not None else ""), err=as_json)
 
 
 @app.command()
@@ -207,6 +252,7 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
              alpha: float = typer.Option(0.05, help="significance level of the adequacy and hypothesis tests"),
              plots: bool = typer.Option(True, help="write the before/after figure"),
              quiet: bool = typer.Option(False, "--quiet", "-q"),
+             as_json: bool = _json_option(),
              allow_large: bool = _allow_large()):
     """Is the model adequate? If not: where is the mismatch, what physics is missing, how much better it fits."""
     from geoback.diagnosis import diagnose as run_diagnosis
@@ -221,7 +267,9 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
     d = run_diagnosis(loaded, alpha=alpha, progress=say)
     exploration = explore(d.final_misfit, d.final, ("profiles",)) if plots else None
     write_diagnosis(d, folder, plots=plots, exploration=exploration)
-    if not quiet:
+    if as_json:
+        _print_json(folder / "diagnosis.json")
+    elif not quiet:
         typer.echo(diagnosis_text(d))
     else:
         typer.echo(verdict(d))
@@ -237,17 +285,17 @@ move from the initial values; 2 the input was refused (the message names file, l
 @friendly
 def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         out: Optional[str] = typer.Option(None, help=OUT_HELP),
-        method: Optional[str] = typer.Option(None, help="lm, lm-scaled or gn (default: the case's fit.method)"),
+        method: Optional[Method] = typer.Option(None, case_sensitive=False,
+                                                help="estimation method (default: the case's fit.method)"),
         plots: bool = typer.Option(False, "--plots", help="also write figures (PNG and SVG)"),
         profile: bool = typer.Option(False, "--profile", help="profile-likelihood intervals for every parameter "
                                      "(by default only where the linearised interval is unreliable)"),
         strict: bool = typer.Option(False, "--strict", help="exit 3 if the result carries any warning (for CI)"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="print only the final line"),
-        as_json: bool = typer.Option(False, "--json", help="print summary.json to stdout"),
+        as_json: bool = _json_option(),
         allow_large: bool = _allow_large()):
     """Identify the case's parameters by maximum likelihood and write all results."""
-    if method is not None and method not in ("lm", "lm-scaled", "gn"):
-        raise GeobackError(f"--method must be lm, lm-scaled or gn, not '{method}'")
+    method = method.value if method is not None else None
     out = _check_out(out)
     loaded = _load(case, allow_large)  # schema errors first: no heavy imports before them
     folder = _out_dir(loaded, out)
@@ -270,7 +318,7 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
     res = run_case(loaded, folder, method=method, progress=progress, plots=plots, say=_say if talk else None,
                    prepared=named, profile="all" if profile else "auto")
     if as_json:
-        typer.echo(json.dumps(json.loads((folder / "summary.json").read_text())))
+        _print_json(folder / "summary.json")
     elif not quiet:
         typer.echo(report_text(res))
     s = summary(res)
@@ -293,6 +341,7 @@ def design(case: Path = typer.Argument(..., help="case file (YAML) with a design
            separate: bool = typer.Option(False, "--separate", help="also rank the candidates by their power to "
                                          "tell apart the two hypotheses `geoback diagnose` finds leading "
                                          "(runs the diagnosis first)"),
+           as_json: bool = _json_option(),
            allow_large: bool = _allow_large()):
     """Rank candidate instruments by how much they would narrow the forecasts (or the parameters)."""
     out = _check_out(out)
@@ -318,36 +367,42 @@ def design(case: Path = typer.Argument(..., help="case file (YAML) with a design
         _say("diagnosing: which hypotheses explain the readings best")
         d = discriminate(analysis, d, progress=_say)
     write_design(d, folder, loaded.case.name, plots=plots)
-    typer.echo(design_text(d, loaded.case.name))
-    typer.echo(f"best: {d.best} ({100 * d.reduction[d.ranking[0]]:.0f} % narrower) -> {folder}/design.md")
+    if as_json:
+        _print_json(folder / "design.json")
+    else:
+        typer.echo(design_text(d, loaded.case.name))
+    typer.echo(f"best: {d.best} ({100 * d.reduction[d.ranking[0]]:.0f} % narrower) -> {folder}/design.md", err=as_json)
     D = d.discrimination
     if D is not None and not D.found:
-        typer.echo("diagnose refitted no hypothesis: nothing to tell apart")
+        typer.echo("diagnose refitted no hypothesis: nothing to tell apart", err=as_json)
     elif D is not None and D.separation.max() > 1e-9:
         k = int(D.separation.argmax())
-        typer.echo(f"best to tell {D.a} from {D.b}: {D.names[k]} (power {D.power[k]:.2f})")
+        typer.echo(f"best to tell {D.a} from {D.b}: {D.names[k]} (power {D.power[k]:.2f})", err=as_json)
 
 
 @app.command()
 @friendly
 def covariance(case: Optional[Path] = typer.Argument(None, help="case file: print an instrument's C_x"),
                name: Optional[str] = typer.Option(None, "--name", help="instrument name in the case"),
-               instrument: Optional[str] = typer.Option(None, help="inclinometer, sliding-micrometer (extensometer) or deflectometer"),
+               instrument: Optional[str] = typer.Option(None, help="inclinometer, sliding-micrometer (extensometer), "
+                                                        "deflectometer, points or convergence"),
                stations: Optional[int] = typer.Option(None, help="number of stations"),
                spacing: Optional[float] = typer.Option(None, help="equal station spacing [m]"),
                lengths: Optional[str] = typer.Option(None, help="station lengths l1,l2,... from the reference end [m]"),
-               sigma: Optional[float] = typer.Option(None, help="std of one primary reading"),
+               sigma: Optional[float] = typer.Option(None, help="std of one primary reading [m] (points, convergence: "
+                                                   "of one reading)"),
                var_a: float = typer.Option(0.0, help="variance of A (sliding micrometer)"),
                var_b: float = typer.Option(0.0, help="variance of B (inclinometer)"),
                var_c: float = typer.Option(0.0, help="variance of C (deflectometer)"),
                var_d: float = typer.Option(0.0, help="variance of D (deflectometer)"),
-               fmt: str = typer.Option("table", "--format", help="table, csv or json"),
+               fmt: Format = typer.Option(Format.table, "--format", case_sensitive=False, help="output format"),
                header: bool = typer.Option(False, help="with --format csv: one header row of labels")):
     """Print a measurement covariance matrix C_x (eqns 10-20), in station order from the reference end."""
+    import numpy as np
+
     from geoback.case import covariance as cov
 
-    if fmt not in ("table", "csv", "json"):
-        raise GeobackError(f"--format must be table, csv or json, not '{fmt}'")
+    fmt = fmt.value
     if case is not None:
         if not name:
             raise GeobackError("give --name INSTRUMENT to choose an instrument of the case")
@@ -360,10 +415,22 @@ def covariance(case: Optional[Path] = typer.Argument(None, help="case file: prin
                                f"(instruments: {', '.join(i.name for i in loaded.case.instruments)})")
         block = build_block(loaded.case.instruments[idx], loaded, idx)
         labels = [f"{lab.component}{lab.station}" for lab in block.labels]
-        typer.echo(cov.render_matrix(block.covariance, fmt, header=header or fmt != "csv", labels=labels))
+        _print_covariance(block.covariance, fmt, header, labels,
+                          f"C_x of {block.kind} {name} [m²], readings in station order from the reference end")
         return
     if instrument is None or sigma is None:
         raise GeobackError("give a case file with --name, or --instrument KIND with --sigma and the stations")
+    n_guess = stations if stations is not None else (len(lengths.split(",")) if lengths else 0)
+    if n_guess and n_guess * n_guess * 8 > MAX_MATRIX_BYTES:
+        raise GeobackError(f"--stations {n_guess}: expected at most {int((MAX_MATRIX_BYTES / 8) ** 0.5):,} stations "
+                           f"(a dense {n_guess:,} x {n_guess:,} matrix takes {n_guess * n_guess * 8 / 1e9:.3g} GB)")
+    if instrument.strip().lower() in ("points", "convergence"):
+        if not sigma > 0:
+            raise GeobackError(f"--sigma must be positive, found {sigma:g}")
+        n = stations if stations is not None else 1
+        _print_covariance(sigma ** 2 * np.eye(n), fmt, header, None,
+                          f"C_x of {n} independent {instrument.strip().lower()} reading(s) [units of --sigma, squared]")
+        return
     kind = cov.normalise_kind(instrument)
     ls = None
     if lengths is not None:
@@ -378,7 +445,28 @@ def covariance(case: Optional[Path] = typer.Argument(None, help="case file: prin
     variances = {"sliding_micrometer": {"A": var_a}, "inclinometer": {"B": var_b},
                  "deflectometer": {"C": var_c, "D": var_d}}[kind]
     C = cov.instrument_covariance(kind, ls, sigma, variances)
-    typer.echo(cov.render_matrix(C, fmt, header=header or fmt != "csv"))
+    _print_covariance(C, fmt, header, None, f"C_x of {'an' if kind[0] in 'aeiou' else 'a'} {kind.replace('_', ' ')} with {len(ls)} stations "
+                                            f"[units of --sigma, squared: m² with sigma in m], from the reference end")
+
+
+MAX_MATRIX_BYTES = 1e9  # a dense covariance printed by `geoback covariance`
+
+
+def _print_covariance(C, fmt: str, header: bool, labels, caption: str) -> None:
+    """The matrix in `fmt`, with its caption: the table's first line, json's "caption", stderr for csv
+    (whose stdout stays plain numbers)."""
+    import numpy as np
+
+    from geoback.case import covariance as cov
+
+    text = cov.render_matrix(np.asarray(C), fmt, header=header or fmt != "csv", labels=labels)
+    if fmt == "json":
+        text = json.dumps({"caption": caption, **json.loads(text)})
+    elif fmt == "table":
+        text = caption + "\n" + text
+    else:
+        typer.echo(caption, err=True)
+    typer.echo(text.rstrip("\n"))
 
 
 @app.command()
@@ -389,6 +477,7 @@ def batch(targets: list[str] = typer.Argument(..., help="folders (every *.yaml i
           scheduler: Optional[str] = typer.Option(None, help="Dask scheduler address (tcp://host:8786) "
                                                   "instead of local processes"),
           out: str = typer.Option("results/batch", help="output folder: summary.csv and <case name>/"),
+          as_json: bool = _json_option(),
           allow_large: bool = _allow_large()):
     """Identify many cases in parallel; write summary.csv and each case's results. Exit 1 if any failed."""
     out = _check_out(out, replaced=False)
@@ -406,7 +495,9 @@ def batch(targets: list[str] = typer.Argument(..., help="folders (every *.yaml i
              f"{out / 'summary.csv'} was not updated")
         raise typer.Exit(130) from None
     bad = failed(rows)
-    typer.echo(f"{len(rows) - len(bad)} of {len(rows)} case(s) converged -> {out / 'summary.csv'}")
+    if as_json:
+        typer.echo(json.dumps([{k: v for k, v in row.items() if k != "out"} for row in rows]))
+    typer.echo(f"{len(rows) - len(bad)} of {len(rows)} case(s) converged -> {out / 'summary.csv'}", err=as_json)
     if bad:
         typer.echo("failed: " + ", ".join(f"{row['file']} ({row['status']})" for row in bad), err=True)
         raise typer.Exit(1)
