@@ -139,7 +139,8 @@ def result_set(folder: str | os.PathLike, kind: str, run_id: str | None = None) 
     of the same kind that the new set does not write are dropped. `run_id` is recorded in the
     manifest (default: a new random id).
     """
-    folder = Path(folder)
+    check_out(folder, "the results folder")  # the command line's checks, for library callers too: never
+    folder = Path(folder)                     # the current folder or one holding it, a file, a place not writable
     if not folder.name or folder.name in (".", "..") or folder.is_symlink():
         folder = folder.resolve()  # a linked results folder: its target is replaced, the link kept
     parent = folder.parent
