@@ -42,3 +42,46 @@ def test_run_case_writes_a_results_subfolder(tmp_path, monkeypatch):
     assert res.fit.status == "converged"
     assert (tmp_path / "out" / "summary.json").is_file() and (tmp_path / "notes.txt").read_text() == "mine"
     assert os.getcwd() == str(tmp_path)
+
+
+@pytest.mark.parametrize("alpha", [0, 0.0, 1, -1, float("nan"), float("inf"), "0.05"])
+def test_diagnose_refuses_a_level_outside_0_1(alpha):
+    """`diagnose --alpha 0` ran until killed (every hypothesis 'significant' at no level, refits without
+    end) and -1 or nan ended in scipy's words; the library refuses them at once."""
+    with pytest.raises(GeobackError, match="between 0 and 1"):
+        geoback.diagnose(geoback.load_case(PAPER), alpha=alpha)
+
+
+def test_diagnose_cli_refuses_alpha_before_any_work(tmp_path):
+    from measure import run_cli
+
+    for value in ("0", "-1", "nan", "1.5"):
+        run = run_cli(["diagnose", PAPER, "--alpha", value, "--out", tmp_path / "d"], tmp_path)
+        assert run.returncode == 2 and "--alpha: expected a significance level between 0 and 1" in run.stderr, \
+            run.stderr
+        assert "Traceback" not in run.stderr and not (tmp_path / "d").exists()
+
+
+def test_an_error_scale_prior_of_huge_dof_is_refused_located(tmp_path):
+    """An inverse-chi2 prior worth 1e20 readings ended in a traceback in run_case; it is a known
+    scale, refused at load with its location."""
+    import yaml
+
+    data = yaml.safe_load((ROOT / "cases" / "tunnel-paper-error-scales.yaml").read_text())
+    data["error_scales"] = [{"instruments": ["I1"], "prior": {"shape": "inverse-chi2", "dof": 1e20}}]
+    for ins in data["instruments"]:
+        if ins.get("readings_file"):
+            ins["readings_file"] = str(ROOT / "cases" / ins["readings_file"])
+    path = tmp_path / "huge-dof.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(GeobackError) as info:
+        geoback.load_case(path)
+    assert "error_scales[0].prior.dof" in str(info.value) and "scale: known" in str(info.value)
+
+
+def test_simulate_seed_must_be_a_whole_number_0_or_above(tmp_path):
+    from measure import run_cli
+
+    run = run_cli(["simulate", PAPER, "--noise", "--seed", "-1", "--readings-out", tmp_path / "r.csv"], tmp_path)
+    assert run.returncode == 2 and run.stderr.startswith("error: --seed: expected a whole number 0 or above, found -1")
+    assert not (tmp_path / "r.csv").exists()

@@ -269,6 +269,9 @@ class Prior(Strict):
 _NAME = r"^[A-Za-z0-9_\-.]+$"
 
 
+MAX_PRIOR_DOF = 1e6  # an inverse-chi2 prior worth more readings than this is a known scale
+
+
 class ScalePrior(Strict):
     """What is known of the factor k = true sigma / stated sigma before the readings: the stated
     sigma is right within a factor `within` with probability `level` (1/within <= k <= within)."""
@@ -289,6 +292,14 @@ class ScalePrior(Strict):
         if v is not None and not v > 1:
             raise ValueError(f"expected a factor greater than 1 (within: 1 would say the stated sigma is exact: "
                              f"give the instruments scale: known), found {number_text(v)}")
+        return v
+
+    @field_validator("dof")
+    @classmethod
+    def _finite_information(cls, v):
+        if v is not None and v > MAX_PRIOR_DOF:
+            raise ValueError(f"expected at most {MAX_PRIOR_DOF:g} degrees of freedom (a stated sigma worth more readings "
+                             f"than that is exact: give the instruments scale: known), found {number_text(v)}")
         return v
 
     @model_validator(mode="after")

@@ -192,6 +192,8 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              as_json: bool = _json_option(),
              allow_large: bool = _allow_large()):
     """Forward run: predicted readings and the field; or study data (--readings-out, --noise)."""
+    if seed < 0:
+        raise GeobackError(f"--seed: expected a whole number 0 or above, found {seed}")
     out = _check_out(out)
     readings_out = _check_out(readings_out, "--readings-out", single_file=True)
     from geoback.inference.identification import prepare
@@ -249,7 +251,8 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
 @friendly
 def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
              out: Optional[str] = typer.Option(None, help=OUT_HELP),
-             alpha: float = typer.Option(0.05, help="significance level of the adequacy and hypothesis tests"),
+             alpha: float = typer.Option(0.05, help="significance level of the adequacy and hypothesis tests, "
+                                         "between 0 and 1"),
              plots: bool = typer.Option(True, help="write the before/after figure"),
              quiet: bool = typer.Option(False, "--quiet", "-q"),
              as_json: bool = _json_option(),
@@ -260,6 +263,8 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
     from geoback.reports.diagnosis_report import verdict
     from geoback.inference.explore import explore
 
+    if not 0.0 < alpha < 1.0:  # (nan fails too) checked again by the library; here before any work
+        raise GeobackError(f"--alpha: expected a significance level between 0 and 1 (e.g. 0.05), found {alpha:g}")
     out = _check_out(out)
     loaded = _load(case, allow_large)
     folder = _out_dir(loaded, out)

@@ -279,6 +279,15 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
 
     from geoback.inference.identification import Analysis, prepare
 
+    if not (isinstance(alpha, (int, float)) and 0.0 < float(alpha) < 1.0):
+        from geoback.errors import GeobackError
+
+        raise GeobackError(f"alpha: expected a significance level between 0 and 1 (e.g. 0.05), found {alpha!r}")
+    for name, value, least in (("max_rounds", max_rounds, 0), ("refit_top", refit_top, 1)):
+        if not (isinstance(value, int) and value >= least):
+            from geoback.errors import GeobackError
+
+            raise GeobackError(f"{name}: expected a whole number of at least {least}, found {value!r}")
     t_start = time.perf_counter()
     analysis = case if isinstance(case, Analysis) else prepare(case)
     if analysis.misfit is None:
