@@ -85,3 +85,21 @@ def test_simulate_seed_must_be_a_whole_number_0_or_above(tmp_path):
     run = run_cli(["simulate", PAPER, "--noise", "--seed", "-1", "--readings-out", tmp_path / "r.csv"], tmp_path)
     assert run.returncode == 2 and run.stderr.startswith("error: --seed: expected a whole number 0 or above, found -1")
     assert not (tmp_path / "r.csv").exists()
+
+
+def test_a_forecast_chord_whose_ends_coincide_is_refused_by_validate(tmp_path):
+    """`validate` said valid and `run` refused: a convergence forecast between one point and itself."""
+    import yaml
+
+    data = yaml.safe_load((ROOT / "cases" / "staged-forecast.yaml").read_text())
+    data["forecasts"].append({"name": "chord", "kind": "convergence", "points": [[4.0, -15.0], [4.0, -15.0]],
+                              "stage": "lined"})
+    for ins in data["instruments"]:
+        if ins.get("readings_file"):
+            ins["readings_file"] = str(ROOT / "cases" / ins["readings_file"])
+    path = tmp_path / "chord.yaml"
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(GeobackError) as info:
+        geoback.load_case(path)
+    index = len(data["forecasts"]) - 1
+    assert f"forecasts[{index}].points" in str(info.value) and "two distinct points" in str(info.value)

@@ -371,6 +371,9 @@ def forecast_problems(case: Case) -> list[tuple[tuple, str]]:
                 why = _point_problem(g, p, "a point" if f.kind == "points" else "a chord end")
                 if why:
                     out.append((at + ("points", j), why))
+            if f.kind == "convergence" and len(f.points) == 2 and tuple(f.points[0]) == tuple(f.points[1]):
+                out.append((at + ("points",), f"expected a chord between two distinct points, found both at "
+                                              f"({number_text(f.points[0][0])}, {number_text(f.points[0][1])})"))
         elif f.kind == "line":
             for key, p in (("start", f.start), ("end", f.end)):
                 why = _point_problem(g, p, f"the line's {key}")
