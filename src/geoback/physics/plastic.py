@@ -40,8 +40,9 @@ ground (refused by the case checks), cross-anisotropic elasticity.
 """
 from __future__ import annotations
 
+import copy
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -272,6 +273,15 @@ class PlasticSimulation(Simulation):
     def release(self) -> None:
         """Forget the last run (and the warm start it offers): the next run starts from scratch."""
         self._runs.run, self._runs.warm = None, None
+
+    def replaying(self, values: Mapping) -> "PlasticSimulation":
+        """A copy replaying the increments of the run at `values` (no halving) with a tight Newton
+        tolerance, from scratch: its readings near `values` are the discrete function whose exact
+        derivatives the sensitivities at `values` are (finite differences of it converge to them)."""
+        fd = copy.copy(self)
+        fd.options = replace(self.options, schedule=self.solution(values).result.schedule, refine=False, tol=1e-13)
+        fd.release()
+        return fd
 
     # ------------------------------------------------------------------ fields and the plastic zone
     def _point_plastic_strain(self, values: Mapping, run: _Run) -> np.ndarray:

@@ -78,6 +78,11 @@ def is_instrument_term(name: str) -> bool:
     return is_constant(name) or is_instrument_error(name)
 
 
+def _of_domain(name: str, doc: str) -> property:
+    """A read-only attribute of the simulation that is its domain's."""
+    return property(lambda self: getattr(self.domain, name), doc=doc)
+
+
 class Simulation(ABC):
     """Readings of a survey and their sensitivities at named values (see the module docstring).
 
@@ -105,39 +110,14 @@ class Simulation(ABC):
         self.names = names  # geoback.physics.names.Names
 
     # ------------------------------------------------------------------ the domain
-    @property
-    def loaded(self):
-        """The LoadedCase the simulation was built from."""
-        return self.domain.loaded
-
-    @property
-    def mesh(self):
-        return self.domain.mesh
-
-    @property
-    def fe(self):
-        return self.domain.fe
-
-    @property
-    def ground(self):
-        return self.domain.ground
-
-    @property
-    def plan(self):
-        """The construction plan (``construction.StagePlan``)."""
-        return self.domain.plan
-
-    @property
-    def counters(self) -> Counters:
-        return self.domain.counters
-
-    @property
-    def timings(self) -> dict:
-        return self.domain.timings
-
-    @property
-    def backend(self) -> str | None:
-        return self.domain.backend
+    loaded = _of_domain("loaded", "The LoadedCase the simulation was built from.")
+    mesh = _of_domain("mesh", "The ground's mesh (``mesh.Mesh``).")
+    fe = _of_domain("fe", "The FE model (``fem.FEModel``).")
+    ground = _of_domain("ground", "The ground as a function of the named values (``ground.Ground``).")
+    plan = _of_domain("plan", "The construction plan (``construction.StagePlan``).")
+    counters = _of_domain("counters", "What the simulation (and its views) have spent (``Counters``).")
+    timings = _of_domain("timings", "Seconds of the set-up: mesh, assembly, observations (and more by physics).")
+    backend = _of_domain("backend", "The sparse solver asked for (None: chosen by size).")
 
     @property
     def survey(self) -> Survey:
@@ -271,6 +251,13 @@ class Simulation(ABC):
 
     def release(self) -> None:
         """Free memory held by factorisations (the simulation stays usable)."""
+
+    def replaying(self, values: Mapping) -> "Simulation":
+        """A simulation whose readings near `values` are the same discrete function of the values as
+        this one's at `values`, to take finite differences of (what the sensitivities are exact
+        derivatives of): this simulation itself when its discretisation does not depend on the values
+        (linear physics)."""
+        return self
 
     # ------------------------------------------------------------------ other instruments
     def surveying(self, blocks) -> "Simulation":
