@@ -24,7 +24,7 @@ from geoback.physics.mesh import Mesh, build_mesh
 from geoback.physics.simulation import Counters, refuse_late_blocks, stage_survey
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Domain:
     """A case meshed and assembled with its survey (module docstring)."""
 
