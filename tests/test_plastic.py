@@ -15,7 +15,6 @@ relative; readings with 5, 10, 20, 40 increments per unit of release differ from
 from __future__ import annotations
 
 import copy
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -26,7 +25,6 @@ from geoback.inference.estimate import Settings, fit
 from geoback.inference.identification import prepare
 from geoback.observation.instruments import build_survey
 from geoback.physics.plastic import PlasticSimulation
-from geoback.physics.plasticity import Options
 from geoback.physics.factory import make_simulation
 
 pytestmark = pytest.mark.quick  # the edit-test loop tier (`pytest -m quick`)
@@ -83,11 +81,7 @@ def test_plastic_zone_at_both_stages(sim):
 
 def _replayed(sim: PlasticSimulation) -> PlasticSimulation:
     """The simulation replaying its last run's schedule with a tight Newton tolerance (finite differences)."""
-    fd = copy.copy(sim)
-    fd.options = replace(sim.options, schedule=sim.solution(sim.quantities()).result.schedule, refine=False,
-                         tol=1e-13)
-    fd.release()
-    return fd
+    return sim.replaying(sim.quantities())
 
 
 def test_sensitivities_against_central_differences(sim):
@@ -254,9 +248,7 @@ def test_forecasts_on_yielding_ground_are_the_model_at_the_estimate():
     assert np.all(np.isfinite(d.after)) and d.best == d.names[0]  # a point near the trough beats one far out
 
     # the band's sensitivities: exact DDM columns against central differences of the trough
-    fd = copy.copy(fresh)
-    fd.options = replace(fresh.options, schedule=fresh.solution(values).result.schedule, refine=False, tol=1e-13)
-    fd.release()
+    fd = fresh.replaying(values)
     for j, name in enumerate(res.parameters.names):
         h = 1e-5 * abs(values[name])
         up, down = dict(values), dict(values)

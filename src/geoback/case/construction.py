@@ -24,6 +24,7 @@ from typing import Mapping
 
 import numpy as np
 
+from geoback.case.limits import QUANTITIES, Limits
 from geoback.case.schema import Case, number_text
 
 DEFAULT_STAGE = "excavation"
@@ -95,17 +96,20 @@ class StagePlan:
             out[f"nu[{self.lining.name}]"] = float(self.lining.nu)
         return out
 
-    def unit(self, name: str) -> str | None:
-        if name in self.values:
-            return "-"
-        if self.lining is not None and name == f"E[{self.lining.name}]":
-            return "kPa"
-        if self.lining is not None and name == f"nu[{self.lining.name}]":
-            return "-"
-        return None
-
     def knows(self, name: str) -> bool:
         return name in self.values or name in self.lining_names()
+
+    def canonical(self, name: str) -> str | None:
+        """The name itself if the plan owns it (stages' releases and the lining's values are always
+        written in full), else None."""
+        return name if self.knows(name) else None
+
+    def unit(self, name: str) -> str | None:
+        return QUANTITIES[name.partition("[")[0]][0] if self.knows(name) else None
+
+    def limits(self, name: str, values: Mapping) -> Limits | None:
+        """Allowed and usual range of a release or a lining value (``limits.QUANTITIES``)."""
+        return QUANTITIES[name.partition("[")[0]][1] if self.knows(name) else None
 
     @property
     def configurations(self) -> list[int]:

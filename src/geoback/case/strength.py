@@ -23,10 +23,8 @@ from dataclasses import dataclass
 from typing import Mapping
 
 from geoback.case.schema import MC_FIELDS, Case, number_text
-from geoback.case.limits import COHESION, DILATION, FRICTION, TENSION, Limits
+from geoback.case.limits import QUANTITIES, Limits
 
-UNITS = {"c": "kPa", "phi": "deg", "psi": "deg", "tension": "kPa"}
-LIMITS = {"c": COHESION, "phi": FRICTION, "psi": DILATION, "tension": TENSION}
 # a linear-elastic layer next to mohr-coulomb ones: a strength no stress reaches (c in kPa, angles in degrees)
 ELASTIC = {"c": 1e30, "phi": 30.0, "psi": 30.0, "tension": math.inf}
 
@@ -60,6 +58,10 @@ class Strength:
     def knows(self, name: str) -> bool:
         return name in self.values
 
+    def quantities(self) -> dict[str, float]:
+        """The strength values of the case (c, phi, psi of every mohr-coulomb layer; tension where given)."""
+        return dict(self.values)
+
     def canonical(self, name: str) -> str | None:
         """'c' -> 'c[clay]' when one layer is mohr-coulomb; None if not a strength value of the case."""
         base, _, rest = name.partition("[")
@@ -71,13 +73,13 @@ class Strength:
         return name if name in self.values else None
 
     def unit(self, name: str) -> str | None:
-        return UNITS.get(name.partition("[")[0]) if name in self.values else None
+        return QUANTITIES[name.partition("[")[0]][0] if name in self.values else None
 
     def limits(self, name: str, values: Mapping) -> Limits:
         """Allowed and usual range; the dilation angle at most the friction angle, the cut-off at
         most the apex c / tan phi of its layer."""
         base, _, rest = name.partition("[")
-        layer, lim = rest[:-1], LIMITS[base]
+        layer, lim = rest[:-1], QUANTITIES[base][1]
         if base == "psi" and f"phi[{layer}]" in values:
             phi = float(values[f"phi[{layer}]"].real)
             return Limits(lim.lo, min(lim.hi, phi), (lim.plausible[0], min(lim.plausible[1], phi)))

@@ -7,38 +7,23 @@ itself a multiple of K (a modulus that scales the whole stiffness) dK/dv u = alp
 matrix product (eqn 42). Loads are remembered by their wall stresses (the factorisation's span
 cache keyed by them), so a load in the span of earlier ones costs no back-substitution.
 
-Proportionality is tested entry by entry (max-norm), which, unlike a test on vector norms, does
-not fail from rounding as the mesh grows.
+Composition: the case's ``Domain`` (``domain.py``), the ground's ``FactorCache`` (``stiffness.py``)
+and the last forward solution; names resolved by ``Names`` over the ground alone.
 """
 from __future__ import annotations
 
-import time
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from geoback.case.loading import LoadedCase
+from geoback.physics.domain import build_domain
 from geoback.physics.fem import FEModel
-from geoback.physics.ground import Ground
 from geoback.observation.instruments import InstrumentBlock
-from geoback.physics.mesh import Mesh, build_mesh
-from geoback.physics.simulation import Counters, Field, Prediction, Simulation, Stopwatch, stage_survey
-from geoback.physics.solver import Factorisation
-
-PROPORTIONAL = 1e-13  # entry-wise relative tolerance of "K(v) = s K(v_ref)"
-
-
-def proportion(a: np.ndarray, b: np.ndarray) -> float | None:
-    """s with a = s b entry by entry (to rounding, max-norm), or None."""
-    a, b = np.asarray(a).ravel(), np.asarray(b).ravel()
-    k = int(np.argmax(np.abs(b)))
-    if b[k] == 0:
-        return None
-    s = float(a[k] / b[k])
-    scale = max(float(np.abs(a).max()), abs(s) * float(np.abs(b).max()))
-    if scale == 0:
-        return s
-    return s if float(np.abs(a - s * b).max()) <= PROPORTIONAL * scale else None
+from geoback.physics.mesh import Mesh
+from geoback.physics.names import Names
+from geoback.physics.simulation import Field, Prediction, Simulation
+from geoback.physics.stiffness import FactorCache, proportion
 
 
 class _Load:
@@ -54,105 +39,65 @@ class _Load:
         return self._f
 
 
+class Memo:
+    """The last result computed and what it was computed for (`key`), kept by a component that a
+    simulation shares with its views."""
+
+    def __init__(self):
+        self.key, self.value = None, None
+
+
 class ElasticSimulation(Simulation):
-    """A case meshed and assembled, predicting readings of its instruments for any values."""
+    """A case meshed and assembled, predicting readings of its instruments for any values.
+
+    Holds its ``Domain``, the ground's factorisation (``stiffness``, a ``FactorCache``) and the last
+    forward solution (``_last``), both shared with its views (``surveying``)."""
 
     reads_depth_offsets = True
+    SHARED = ("stiffness", "_last")
 
     def __init__(self, loaded: LoadedCase, mesh: Mesh | None = None, blocks: list[InstrumentBlock] | None = None,
                  extensions: Mapping | None = None, backend: str | None = None):
-        case = loaded.case
-        self.loaded = loaded
-        t0 = time.perf_counter()
-        self.mesh = mesh or build_mesh(case, allow_large=getattr(loaded, "allow_large", False))
-        t1 = time.perf_counter()
-        g = case.geometry
-        self.fe = FEModel(self.mesh, g.width, g.depth, (0.0, -g.axis_depth), g.radius)
-        t2 = time.perf_counter()
-        self.ground = Ground(case, -self.fe.centroid[:, 1], self.fe.region, -self.fe.wall_points[:, 1],
-                             extensions or {})
-        self.survey = stage_survey(loaded, blocks, self.stages, self.fe)
-        self.timings = {"mesh": t1 - t0, "assembly": t2 - t1, "observations": time.perf_counter() - t2}
-        self.backend = backend
-        self.counters = Counters()
-        self._factor: tuple[np.ndarray, Factorisation] | None = None
-        self._last = None  # (values key, forward solution) of the last forward run
-
-    # ------------------------------------------------------------------ names
-    def quantities(self) -> dict[str, float]:
-        return self.ground.baseline()
-
-    def canonical(self, name: str) -> str | None:
-        return self.ground.canonical(name)
-
-    def null_value(self, name: str, values: Mapping) -> float | None:
-        return self.ground.null_value(name, values)
-
-    def unit(self, name: str) -> str:
-        return self.ground.unit(name)
-
-    def limits(self, name: str, values: Mapping):
-        return self.ground.limits(name, values)
-
-    @property
-    def dofs(self) -> int:
-        return self.fe.ndof
+        if loaded.case.construction is not None:
+            raise ValueError("a case with a construction section is a StagedSimulation (make_simulation chooses)")
+        domain = build_domain(loaded, mesh, blocks, backend, extensions)
+        super().__init__(domain, Names(domain.ground))
+        self.stiffness = FactorCache(domain.counters, backend)
+        self._last = Memo()  # values key -> forward solution of the last forward run
 
     @property
     def solver(self) -> str | None:
-        return self._factor[1].backend if self._factor else None
+        fact = self.stiffness.current
+        return fact.backend if fact is not None else None
 
     # ------------------------------------------------------------------ solves
-    def _factorised(self, coeffs: np.ndarray) -> tuple[Factorisation, float]:
-        """Factorisation of K(coeffs) and the scale s with K(coeffs) = s K(factorised)."""
-        if self._factor is not None:
-            ref, fact = self._factor
-            s = proportion(coeffs, ref)
-            if s is not None and s > 0:
-                return fact, s
-            fact.release()
-        with Stopwatch(self.counters, "seconds_assembling"):
-            K = self.fe.matrix(coeffs)
-        with Stopwatch(self.counters, "seconds_factorising"):
-            fact = Factorisation(K, self.backend)
-        self.counters.factorisations += 1
-        self._factor = (np.array(coeffs, float), fact)
-        return fact, 1.0
-
-    def _solve(self, fact: Factorisation, s: float, rhs: np.ndarray, coords: np.ndarray | None = None) -> np.ndarray:
-        """K^-1 rhs with K = s K(factorised); counts real back-substitutions only."""
-        before = fact.backsubstitutions
-        with Stopwatch(self.counters, "seconds_solving"):
-            out = fact.solve(rhs, coords) / s
-        self.counters.solves += fact.backsubstitutions - before
-        return out
-
     def release(self) -> None:
         """Drop the kept factorisation (what a code without reuse does before every solve)."""
-        if self._factor is not None:
-            self._factor[1].release()
-        self._factor = None
+        self.stiffness.release()
 
     def _forward(self, values: Mapping):
         """Ground state, factorisation, load and u at `values` (eqn 31). The last one is remembered:
         an optimiser asks for the sensitivities at the point it has just evaluated."""
         key = tuple(sorted(values.items()))
-        if self._last is not None and self._last[0] == key and self._factor is not None \
-                and self._factor[1] is self._last[1][1]:
-            return self._last[1]
+        last = self._last
+        if last.key == key and self.stiffness.current is not None and self.stiffness.current is last.value[1]:
+            return last.value
         st = self.ground.state(values)
-        fact, s = self._factorised(st.coeffs)
+        fact, s = self.stiffness.factorised(st.coeffs, lambda: self.fe.matrix(st.coeffs))
         self.counters.forward_runs += 1
         coords = np.concatenate([st.sigma_v, st.sigma_h])
         load = _Load(self.fe, st)  # assembled only if the span of earlier loads cannot answer
-        u = self._solve(fact, s, lambda cols: load.vector, coords)
+        u = self.stiffness.solve(fact, s, lambda cols: load.vector, coords)
         out = (st, fact, s, coords, load, u)
-        self._last = (key, out)
+        last.key, last.value = key, out
         return out
 
     def displacement(self, values: Mapping) -> np.ndarray:
         """u on the free dofs for the given named values (eqn 31)."""
         return self._forward(values)[-1]
+
+    def stage_displacements(self, values: Mapping) -> np.ndarray:
+        return self.displacement(values)[None]
 
     def _readings(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
         st, fact, s, coords, f, u = self._forward(values)  # f: the load (a _Load)
@@ -176,28 +121,18 @@ class ElasticSimulation(Simulation):
                                         - keyed[c][2] * f.vector for c in cols])
 
             cols = [j for j, _, _, _ in keyed]
-            du[:, cols] = self._solve(fact, s, rhs, np.column_stack([c for _, _, _, c in keyed]))
+            du[:, cols] = self.stiffness.solve(fact, s, rhs, np.column_stack([c for _, _, _, c in keyed]))
         if raw:
-            du[:, [j for j, _ in raw]] = self._solve(fact, s, np.column_stack([r for _, r in raw]))
+            du[:, [j for j, _ in raw]] = self.stiffness.solve(fact, s, np.column_stack([r for _, r in raw]))
         return Prediction(x, np.asarray(P @ du))
 
     # ------------------------------------------------------------------ fields
     def element_stress(self, values: Mapping, u_full: np.ndarray) -> np.ndarray:
         """Total stress (sxx, syy, sxy) per element: initial geostatic + excavation increment."""
-        st = self.ground.state(values)
-        eps = self.fe.element_strain(u_full)
-        d11, d22, d12, d33 = st.coeffs.T.real
-        ds = np.column_stack([d11 * eps[:, 0] + d12 * eps[:, 1], d12 * eps[:, 0] + d22 * eps[:, 1], d33 * eps[:, 2]])
-        s0 = self.ground.initial_stress(values, -self.fe.centroid[:, 1], self.fe.region)
-        return s0 + ds
+        return self.domain.elastic_stress(values, u_full)
 
     def field(self, values: Mapping) -> Field:
         u = self.fe.expand(self.displacement(values))
         stress = self.element_stress(values, u)
         return Field(self.mesh, u.reshape(-1, 2), {"stress_xx": stress[:, 0], "stress_yy": stress[:, 1],
                                         "stress_xy": stress[:, 2]})
-
-    def displacements_at(self, values: Mapping, points: np.ndarray) -> np.ndarray:
-        Ix, Iy = self.fe.interpolation(points)
-        u = self.displacement(values)
-        return np.column_stack([Ix @ u, Iy @ u])

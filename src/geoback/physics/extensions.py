@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from geoback.physics.ground import Extension
-from geoback.case.limits import MODULUS, Limits
+from geoback.case.limits import MODULUS, RELEASE, Limits
 
 
 def _gradient(f, value, ground, i, values):
@@ -85,5 +85,5 @@ EXTENSIONS: dict[str, Extension] = {e.base: e for e in (
     Extension("K0grad", False, "1/m", 0.0, _k0_gradient, "K0 changing linearly with depth",
               limits=Limits(-1.0, 1.0, (-0.1, 0.1))),
     Extension("beta", False, "-", 1.0, _release, "fraction of the initial stress released",
-              limits=Limits(1e-3, 2.0, (0.05, 1.0))),
+              limits=RELEASE),
 )}

@@ -19,9 +19,10 @@ from typing import Callable, Mapping
 import numpy as np
 
 from geoback.case.loading import Case
-from geoback.case.limits import EARTH_PRESSURE, MODULUS, POISSON, Limits
+from geoback.case.limits import QUANTITIES, Limits
 
 COMPLEX_STEP = 1e-30
+STEMS = ("E", "nu", "K0")  # the ground's own quantities (units and ranges: limits.QUANTITIES)
 
 
 def plane_strain_isotropic(E, nu):
@@ -157,13 +158,13 @@ class Ground:
         base = name.split("[")[0]
         if base in self.extensions:
             return self.extensions[base].unit
-        return {"E": "kPa", "nu": "-", "K0": "-"}.get(base, "-")
+        return QUANTITIES[base][0] if base in STEMS else "-"
 
     def limits(self, name: str, values: Mapping) -> Limits:
         """Allowed and usual range of a quantity (given the other values, e.g. a layer's nu)."""
         base, _, rest = name.partition("[")
-        if base in ("E", "nu", "K0"):
-            return {"E": MODULUS, "nu": POISSON, "K0": EARTH_PRESSURE}[base]
+        if base in STEMS:
+            return QUANTITIES[base][1]
         ext = self.extensions[base]
         if callable(ext.limits):
             layer = self.layers.index(rest[:-1]) if ext.per_layer else None

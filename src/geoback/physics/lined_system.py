@@ -1,19 +1,25 @@
 """The lined configuration of a staged simulation as linear algebra: the ground's Schur complement
 on the wall dofs, the readings' view of the wall, the dense interface solve, and the assembled
 ground-and-lining system used once the ground keeps being refactorised (the choice between them
-and the formulas are in ``staged.py``'s docstring). A mixin of ``StagedSimulation``: it reads the
-simulation's `fe`, `ring`, `survey`, `_factor`, `_cond`, `_lfactor`, `_wall_order`, `counters` and
-`backend`."""
+and the formulas are in ``staged.py``'s docstring).
+
+``LinedSystem`` is a component built from explicit inputs (the FE model, the lining's ring, the
+counters and the sparse backend); the ground's factorisation, its reference coefficients and the
+readings' operator P are passed to the calls that need them. It keeps what does not depend on the
+survey: the assembled lined matrix's factorisation (a ``FactorCache``) and the wall-last ordering
+of the ground's dofs. The per-survey ``Condensation`` is kept by the simulation reading a survey.
+"""
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
 
-from geoback.physics.elastic import proportion
-from geoback.physics.simulation import Stopwatch
+from geoback.physics.simulation import Counters
+from geoback.physics.stiffness import FactorCache, counted_solve
 
 
 @dataclass
@@ -50,33 +56,49 @@ class Interface:
 
 
 class LinedSystem:
-    """The lined configuration's factorised forms (see the module docstring)."""
+    """The lined configuration's factorised forms on one FE model and lining ring (module docstring).
 
-    def _condensation(self, fact) -> Condensation:
-        """Sigma and PW for the ground's current factorisation (reference coefficients)."""
-        if self._cond is not None and self._cond.fact is fact:
-            return self._cond
+    condense: take the condensed form while the ground's factorisation is reused (the default);
+    False assembles and factorises the lined configuration from the start (benchmarks compare)."""
+
+    def __init__(self, fe, ring, counters: Counters, backend: str | None = None):
+        self.fe, self.ring, self.counters, self.backend = fe, ring, counters, backend
+        self.assembled = FactorCache(counters, backend)  # the ground-and-lining matrix's factorisation
+        self.condense = True
+        self._wall_order: np.ndarray | None = None  # ground dofs, the wall's last (for its Schur complement)
+
+    def __copy__(self):
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new.assembled = copy.copy(self.assembled)
+        return new
+
+    def release(self) -> None:
+        self.assembled.release()
+
+    # ------------------------------------------------------------------ condensed onto the wall
+    def condensation(self, fact, coeffs: np.ndarray, P) -> Condensation:
+        """Sigma and PW for the ground's factorisation `fact` of K_g(coeffs) (reference coefficients),
+        read by P; counted as one factorisation."""
         t0 = time.perf_counter()
-        Sigma = self._wall_schur(self._factor[0])
-        PW = self._wall_view(fact)
+        Sigma = self.wall_schur(coeffs)
+        PW = self.wall_view(fact, P)
         self.counters.factorisations += 1
         self.counters.seconds_factorising += time.perf_counter() - t0
-        self._cond = Condensation(fact, PW, Sigma)
-        return self._cond
+        return Condensation(fact, PW, Sigma)
 
-    def _wall_view(self, fact) -> np.ndarray:
+    def wall_view(self, fact, P) -> np.ndarray:
         """PW = P K_ref^-1 U: the readings' view of the wall dofs."""
         U = self.ring.wall_dofs
-        P = self.survey.P
         if P.shape[0] <= len(U):  # PW = (K^-1 P^t)^t U: one back-substitution per reading
-            PW = np.asarray(self._solve(fact, 1.0, np.asarray(P.T.todense()))[U]).T
+            PW = np.asarray(counted_solve(self.counters, fact, 1.0, np.asarray(P.T.todense()))[U]).T
         else:  # or one per wall dof
             E = np.zeros((self.fe.nfree, len(U)))
             E[U, np.arange(len(U))] = 1.0
-            PW = np.asarray(P @ self._solve(fact, 1.0, E))
+            PW = np.asarray(P @ counted_solve(self.counters, fact, 1.0, E))
         return PW
 
-    def _wall_schur(self, coeffs: np.ndarray) -> np.ndarray:
+    def wall_schur(self, coeffs: np.ndarray) -> np.ndarray:
         """The ground's Schur complement on the wall dofs: the trailing block L_WW U_WW of a sparse
         LU of K_g with the wall dofs last (SuperLU, symmetric mode, diagonal pivots; the interior
         in a fill-reducing order found once per mesh)."""
@@ -99,7 +121,8 @@ class LinedSystem:
         Sigma = (lu.L.tocsc()[n - nw:, n - nw:] @ lu.U.tocsr()[n - nw:, n - nw:]).toarray()
         return 0.5 * (Sigma + Sigma.T)
 
-    def _augmented_index(self) -> np.ndarray:
+    # ------------------------------------------------------------------ assembled
+    def augmented_index(self) -> np.ndarray:
         """Ring free dof -> unknown of the assembled lined system (ground free dofs, then inner ring)."""
         ring = self.ring
         idx = np.empty(ring.fe.nfree, np.int64)
@@ -107,41 +130,27 @@ class LinedSystem:
         idx[ring.i] = self.fe.nfree + np.arange(len(ring.i))
         return idx
 
-    def _embed_ring(self, upper, n: int):
+    def embed_ring(self, upper, n: int):
         """The ring's (upper CSR, ring free dofs) matrix as an upper matrix of the lined system."""
         import scipy.sparse as sp
 
         c = upper.tocoo()
-        idx = self._augmented_index()
+        idx = self.augmented_index()
         r, k = idx[c.row], idx[c.col]
         lo, hi = np.minimum(r, k), np.maximum(r, k)
         return sp.csr_matrix((c.data, (lo, hi)), shape=(n, n))
 
-    def _lined_matrix(self, ground_coeffs: np.ndarray, ring_coeffs: np.ndarray):
+    def lined_matrix(self, ground_coeffs: np.ndarray, ring_coeffs: np.ndarray):
         import scipy.sparse as sp
 
         n = self.fe.nfree + len(self.ring.i)
         Kg = self.fe.matrix(ground_coeffs).tocoo()
-        K = sp.csr_matrix((Kg.data, (Kg.row, Kg.col)), shape=(n, n)) + self._embed_ring(self.ring.fe.matrix(ring_coeffs), n)
+        K = sp.csr_matrix((Kg.data, (Kg.row, Kg.col)), shape=(n, n)) + self.embed_ring(self.ring.fe.matrix(ring_coeffs), n)
         K.sum_duplicates()
         K.sort_indices()
         return K
 
-    def _lined_factorised(self, ground_coeffs: np.ndarray, ring_coeffs: np.ndarray):
+    def factorised(self, ground_coeffs: np.ndarray, ring_coeffs: np.ndarray):
         """Factorisation of the assembled lined matrix and its scale against the kept one."""
-        from geoback.physics.solver import Factorisation
-
         coeffs = np.concatenate([np.asarray(ground_coeffs, float).ravel(), np.asarray(ring_coeffs, float).ravel()])
-        if self._lfactor is not None:
-            s = proportion(coeffs, self._lfactor[0])
-            if s is not None and s > 0:
-                return self._lfactor[1], s
-            self._lfactor[1].release()
-        with Stopwatch(self.counters, "seconds_assembling"):
-            K = self._lined_matrix(ground_coeffs, ring_coeffs)
-        with Stopwatch(self.counters, "seconds_factorising"):
-            fact = Factorisation(K, self.backend)
-        self.counters.factorisations += 1
-        self._lfactor = (coeffs, fact)
-        return fact, 1.0
-
+        return self.assembled.factorised(coeffs, lambda: self.lined_matrix(ground_coeffs, ring_coeffs))

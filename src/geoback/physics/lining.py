@@ -183,7 +183,7 @@ class RingModel:
 
     def condensed(self, coeffs: np.ndarray) -> np.ndarray:
         """S = K_oo - K_oi K_ii^-1 K_io of the lining with these element coefficients (real)."""
-        from geoback.physics.elastic import proportion
+        from geoback.physics.stiffness import proportion
 
         coeffs = np.asarray(coeffs, float)
         if self._ref is not None:

@@ -32,26 +32,30 @@ Newton iteration starts from the last run's solution of that increment when the 
 smaller there than at the previous converged state (warm start: an optimiser's next point is near
 its last); the converged solution is the same to the Newton tolerance either way.
 
-Forecasts and design read other instruments through ``Simulation.surveying`` (nothing survey-
-dependent is cached, see SURVEY_CACHES). Not modelled: a lining on yielding ground (refused by the case checks), cross-anisotropic elasticity.
+Composition: the case's ``Domain`` (``domain.py``), the quadrature-point operators, and the last run
+with its warm start (``_Runs``), shared with views on other instruments (``Simulation.surveying``:
+nothing survey-dependent is cached, so a view reads the last run without a new one). Names are
+resolved by ``Names`` over the plan, the strength and the ground. Not modelled: a lining on yielding
+ground (refused by the case checks), cross-anisotropic elasticity.
 """
 from __future__ import annotations
 
+import copy
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from geoback.case.loading import LoadedCase
-from geoback.case.construction import StagePlan
 from geoback.errors import ForwardFailure, GeobackError
-from geoback.physics.fem import FEModel
-from geoback.physics.ground import COMPLEX_STEP, Ground
+from geoback.physics.domain import build_domain
+from geoback.physics.ground import COMPLEX_STEP
 from geoback.observation.instruments import InstrumentBlock
-from geoback.physics.mesh import Mesh, build_mesh
+from geoback.physics.mesh import Mesh
+from geoback.physics.names import Names
 from geoback.physics.plastic_zone import PlasticZone, equivalent_plastic_strain, measure
-from geoback.physics.simulation import Counters, Field, Prediction, Simulation, stage_survey
+from geoback.physics.simulation import Field, Prediction, Simulation
 from geoback.case.strength import MC_FIELDS, Strength
 
 INCREMENTS = 10  # equal load increments per unit of release
@@ -91,78 +95,46 @@ class _Run:
     result: object  # plasticity.Result
 
 
+class _Runs:
+    """The last run, the warm start it offers, and the names asked last (``solution``)."""
+
+    def __init__(self):
+        self.run: _Run | None = None
+        self.warm: dict | None = None  # the last run's increments, to start the next one from (plasticity.solve)
+        self.wanted: tuple = ()
+        self.plain_requests = 0
+
+
 class PlasticSimulation(Simulation):
     """A case with mohr-coulomb ground, meshed, predicting readings at every construction stage."""
 
     piecewise_smooth = True  # a quadrature point that starts to yield in another increment makes a kink
 
+    SHARED = ("_runs",)  # nothing is cached per survey row: a view reads the last run
+
     def __init__(self, loaded: LoadedCase, mesh: Mesh | None = None, blocks: list[InstrumentBlock] | None = None,
                  extensions: Mapping | None = None, backend: str | None = None, increments: int = INCREMENTS):
         from geoback.physics.plasticity import Options
+        from geoback.physics.plasticity.linear import default_backend
         from geoback.physics.plasticity.operators import PointOperators
 
-        case = loaded.case
-        self.loaded = loaded
-        self.plan = StagePlan.of(case)
-        if self.plan.lining is not None:
+        c = loaded.case.construction
+        if c is not None and c.lining is not None:
             raise loaded.error(("construction", "lining"), "expected no lining with mohr-coulomb ground: a lining on "
                                                            "yielding ground is not modelled")
-        self.strength = Strength.of(case)
+        domain = build_domain(loaded, mesh, blocks, backend, extensions)
+        self.strength = Strength.of(loaded.case)
+        super().__init__(domain, Names(domain.ground, domain.plan, self.strength, UNMODELLED))
         t0 = time.perf_counter()
-        self.mesh = mesh or build_mesh(case, allow_large=getattr(loaded, "allow_large", False))
-        t1 = time.perf_counter()
-        g = case.geometry
-        self.fe = FEModel(self.mesh, g.width, g.depth, (0.0, -g.axis_depth), g.radius)
         self.ops = PointOperators(self.fe)
-        self.ground = Ground(case, -self.fe.centroid[:, 1], self.fe.region, -self.fe.wall_points[:, 1],
-                             extensions or {})
         xy = self.ops.point_coordinates()
         self._point_depth = -xy[:, 1]
         self._point_layer = np.repeat(self.fe.region, self.ops.nq)
-        t2 = time.perf_counter()
-        self.survey = stage_survey(loaded, blocks, self.stages, self.fe)
-        self.timings = {"mesh": t1 - t0, "assembly": t2 - t1, "observations": time.perf_counter() - t2}
-        self.backend = backend
-        self.counters = Counters()
+        self.timings["assembly"] += time.perf_counter() - t0
         self.options = Options(schedule=self._schedule(increments), refine=True, backend=backend)
-        self._run: _Run | None = None
-        self._warm: dict | None = None  # the last run's increments, to start the next one from (plasticity.solve)
-        self._wanted: tuple = ()
-        self._plain_requests = 0
-        from geoback.physics.plasticity.linear import default_backend
-
+        self._runs = _Runs()
         self._backend = backend or default_backend(self.fe.nfree)
         self._pardiso = self._backend == "pardiso"
-
-    # ------------------------------------------------------------------ names
-    @property
-    def stages(self) -> list[str]:
-        return list(self.plan.names)
-
-    def quantities(self) -> dict[str, float]:
-        return {**self.ground.baseline(), **self.plan.quantities(), **self.strength.values}
-
-    def canonical(self, name: str) -> str | None:
-        if self.plan.knows(name):
-            return name
-        if name.partition("[")[0] in UNMODELLED:
-            return None
-        return self.strength.canonical(name) or self.ground.canonical(name)
-
-    def null_value(self, name: str, values: Mapping) -> float | None:
-        return self.ground.null_value(name, values)
-
-    def unit(self, name: str) -> str:
-        return self.strength.unit(name) or self.plan.unit(name) or self.ground.unit(name)
-
-    def limits(self, name: str, values: Mapping):
-        if self.strength.knows(name):
-            return self.strength.limits(name, values)
-        return self.ground.limits(name, values)
-
-    @property
-    def dofs(self) -> int:
-        return self.fe.ndof
 
     @property
     def solver(self) -> str | None:
@@ -230,9 +202,9 @@ class PlasticSimulation(Simulation):
         a sensitivity request, those asked then."""
         if wrt:
             return tuple(wrt)
-        self._plain_requests += 1
-        if self._plain_requests <= ANTICIPATE:
-            return tuple(n for n in self._wanted if n in values)
+        self._runs.plain_requests += 1
+        if self._runs.plain_requests <= ANTICIPATE:
+            return tuple(n for n in self._runs.wanted if n in values)
         return ()
 
     def solution(self, values: Mapping, wrt: Sequence[str] = ()) -> _Run:
@@ -240,9 +212,10 @@ class PlasticSimulation(Simulation):
         from geoback.physics.plasticity import NonConvergence, solve
 
         key = tuple(sorted(values.items()))
+        runs = self._runs
         if wrt:
-            self._wanted, self._plain_requests = tuple(wrt), 0
-        run = self._run
+            runs.wanted, runs.plain_requests = tuple(wrt), 0
+        run = runs.run
         if run is not None and run.key == key and set(wrt) <= set(run.names):
             return run
         names = self._names_to_compute(values, wrt)
@@ -253,7 +226,7 @@ class PlasticSimulation(Simulation):
         try:
             with _one_thread(self._pardiso):
                 res = solve(self.fe, mat, sigma0, f, lam, derivatives=derivs, options=self.options,
-                            operators=self.ops, warm=self._warm)
+                            operators=self.ops, warm=runs.warm)
         except NonConvergence as exc:
             self._count(exc.counters)
             raise
@@ -263,9 +236,9 @@ class PlasticSimulation(Simulation):
                                      f"({exc})") from None
             raise
         self._count(res.counters)
-        self._warm = res.warm
-        self._run = _Run(key, tuple(names), res.u, res.du_dp, res)
-        return self._run
+        runs.warm = res.warm
+        runs.run = _Run(key, tuple(names), res.u, res.du_dp, res)
+        return runs.run
 
     def _count(self, c) -> None:
         """Add a solver run's counters (plasticity.linear.Counters) to the simulation's."""
@@ -277,19 +250,9 @@ class PlasticSimulation(Simulation):
         self.counters.seconds_solving += c.seconds.get("backsubstitute", 0.0)
         self.counters.seconds_assembling += c.seconds.get("assemble tangent", 0.0)
 
-    # Forecasts and `geoback design` read other instruments (Simulation.surveying): nothing here is
-    # cached per survey row - the last run holds u and du/dv on every dof of every stage, and each
-    # row's stage is read from the survey at every call - so there is nothing to swap, and the
-    # forecasts read the fit's last run without a new one.
-    SURVEY_CACHES: tuple[str, ...] = ()
-
-    def _row_stage(self) -> np.ndarray:
-        index = {n: k for k, n in enumerate(self.stages)}
-        return np.array([index[lab.stage] for lab in self.survey.labels], np.int64)
-
     def _readings(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
         run = self.solution(values, wrt)
-        rows = self._row_stage()
+        rows = self.domain.row_stage
         P = self.survey.P
         X = P @ run.u.T  # (m, nstages)
         x = X[np.arange(len(rows)), rows]
@@ -307,17 +270,18 @@ class PlasticSimulation(Simulation):
         """u_k on the free dofs after every stage (nstages, nfree)."""
         return self.solution(values).u
 
-    def displacements_at(self, values: Mapping, points: np.ndarray) -> np.ndarray:
-        return self.stage_displacements_at(values, points, self.stages[-1])
-
-    def stage_displacements_at(self, values: Mapping, points: np.ndarray, stage: str) -> np.ndarray:
-        Ix, Iy = self.fe.interpolation(points)
-        u = self.stage_displacements(values)[self.stages.index(stage)]
-        return np.column_stack([Ix @ u, Iy @ u])
-
     def release(self) -> None:
         """Forget the last run (and the warm start it offers): the next run starts from scratch."""
-        self._run, self._warm = None, None
+        self._runs.run, self._runs.warm = None, None
+
+    def replaying(self, values: Mapping) -> "PlasticSimulation":
+        """A copy replaying the increments of the run at `values` (no halving) with a tight Newton
+        tolerance, from scratch: its readings near `values` are the discrete function whose exact
+        derivatives the sensitivities at `values` are (finite differences of it converge to them)."""
+        fd = copy.copy(self)
+        fd.options = replace(self.options, schedule=self.solution(values).result.schedule, refine=False, tol=1e-13)
+        fd.release()
+        return fd
 
     # ------------------------------------------------------------------ fields and the plastic zone
     def _point_plastic_strain(self, values: Mapping, run: _Run) -> np.ndarray:

@@ -7,20 +7,26 @@ survey, and their sensitivities, at given named values,
 
 with its counters of factorisations and solves. Named values are the ground's (``E[clay]``,
 ``K0``, ...), the extensions' (``Egrad[clay]``, ``beta``, ...) and the instruments' integration
-constants (``B[I1]``, ...). The one-step linear-elastic excavation (``elastic.py``) is the first
-implementation; statistics, diagnosis and reports see only this interface.
+constants (``B[I1]``, ...). Statistics, diagnosis and reports see only this interface.
+
+Implementations (registered in ``factory.IMPLEMENTATIONS``, checked by one contract test): the
+one-step linear-elastic excavation (``elastic.py``), staged construction with a lining
+(``staged.py``) and elastoplastic ground (``plastic.py``). Each is composed of the same parts: a
+``Domain`` (``domain.py``, built by ``build_domain``: mesh, FE model, ground, construction plan,
+survey, counters), the ``Names`` it honours (``names.py``) and components of its own physics
+(``stiffness.FactorCache``, ``lined_system.LinedSystem``, the plastic run memo).
 """
 from __future__ import annotations
 
+import copy
 import time
 from abc import ABC, abstractmethod
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
 
-from geoback.observation.instruments import CONSTANT_STEMS, Survey, build_survey, is_instrument_error
+from geoback.observation.instruments import CONSTANT_STEMS, Survey, is_instrument_error
 
 
 @dataclass
@@ -72,49 +78,90 @@ def is_instrument_term(name: str) -> bool:
     return is_constant(name) or is_instrument_error(name)
 
 
+def _of_domain(name: str, doc: str) -> property:
+    """A read-only attribute of the simulation that is its domain's."""
+    return property(lambda self: getattr(self.domain, name), doc=doc)
+
+
 class Simulation(ABC):
     """Readings of a survey and their sensitivities at named values (see the module docstring).
 
-    Subclasses provide the physics: ``quantities``, ``canonical``, ``null_value``, ``unit``,
-    ``_readings`` (x = P u and its sensitivity) and ``field``; this class adds the instruments'
-    integration constants (x -= G c, eqns 11, 15, 18), which no physics needs to know about.
+    A simulation holds its ``Domain`` (``domain.py``: mesh, FE model, ground, construction plan,
+    survey, counters) and its ``Names`` (``names.py``: quantities, canonical names, units, ranges and
+    null values); implementations provide the physics: ``_readings`` (x = P u and its sensitivity),
+    ``stage_displacements`` and ``field``. This class adds the instruments' integration constants
+    (x -= G c, eqns 11, 15, 18), which no physics needs to know about.
+
+    State is kept in two kinds of attribute: components named in ``SHARED`` hold what does not depend
+    on the survey (factorisations, the last solution), and are shared by a view on other instruments
+    (``surveying``) and copied by ``copy.copy``; attributes named in ``SURVEY_CACHES`` hold results per
+    survey row, re-derived when the survey changes (``_survey_changed``).
     """
 
-    loaded: object  # the LoadedCase it was built from
-    survey: Survey
     reads_depth_offsets: bool = False  # _readings observes with survey.operator(values) (zoff[I1] available)
-    counters: Counters
-    timings: dict
-    mesh: object
     # readings only piecewise smooth in the values (ground switching between elastic and plastic): J has
     # kinks, so an optimiser stops once J no longer falls by a meaningful amount (estimate.PIECEWISE_TOL)
     piecewise_smooth: bool = False
+    SHARED: tuple[str, ...] = ()  # components with survey-independent state (shared by views)
+    SURVEY_CACHES: tuple[str, ...] = ()  # attributes holding results per survey row
 
-    # ------------------------------------------------------------------ names
-    @abstractmethod
-    def quantities(self) -> dict[str, float]:
-        """Every named physical value of the case, at the case's values."""
+    def __init__(self, domain, names):
+        self.domain = domain  # geoback.physics.domain.Domain
+        self.names = names  # geoback.physics.names.Names
 
-    @abstractmethod
-    def canonical(self, name: str) -> str | None:
-        """Full name of a physical quantity ('E' -> 'E[clay]' for one layer); None if unknown."""
+    # ------------------------------------------------------------------ the domain
+    loaded = _of_domain("loaded", "The LoadedCase the simulation was built from.")
+    mesh = _of_domain("mesh", "The ground's mesh (``mesh.Mesh``).")
+    fe = _of_domain("fe", "The FE model (``fem.FEModel``).")
+    ground = _of_domain("ground", "The ground as a function of the named values (``ground.Ground``).")
+    plan = _of_domain("plan", "The construction plan (``construction.StagePlan``).")
+    counters = _of_domain("counters", "What the simulation (and its views) have spent (``Counters``).")
+    timings = _of_domain("timings", "Seconds of the set-up: mesh, assembly, observations (and more by physics).")
+    backend = _of_domain("backend", "The sparse solver asked for (None: chosen by size).")
 
-    @abstractmethod
-    def null_value(self, name: str, values: Mapping) -> float | None:
-        """Value of an extension quantity at which the model is the baseline; None if not one."""
+    @property
+    def survey(self) -> Survey:
+        return self.domain.survey
 
-    @abstractmethod
-    def unit(self, name: str) -> str:
-        """Unit of a physical quantity."""
-
-    @abstractmethod
-    def limits(self, name: str, values: Mapping):
-        """Allowed and usual range of a physical quantity (``ground.Limits``)."""
+    @survey.setter
+    def survey(self, survey: Survey) -> None:
+        self.domain = self.domain.with_survey(survey)
+        self._survey_changed()
 
     @property
     def stages(self) -> list[str]:
         """Construction stages the simulation computes, in order (readings are taken at them)."""
-        return ["excavation"]
+        return self.domain.stages
+
+    @property
+    def dofs(self) -> int:
+        return self.fe.ndof
+
+    @property
+    def solver(self) -> str | None:
+        """The sparse solver that factorised (None before any factorisation)."""
+        return None
+
+    # ------------------------------------------------------------------ names
+    def quantities(self) -> dict[str, float]:
+        """Every named physical value of the case, at the case's values."""
+        return self.names.quantities()
+
+    def canonical(self, name: str) -> str | None:
+        """Full name of a physical quantity ('E' -> 'E[clay]' for one layer); None if unknown."""
+        return self.names.canonical(name)
+
+    def null_value(self, name: str, values: Mapping) -> float | None:
+        """Value of an extension quantity at which the model is the baseline; None if not one."""
+        return self.names.null_value(name, values)
+
+    def unit(self, name: str) -> str:
+        """Unit of a physical quantity."""
+        return self.names.unit(name)
+
+    def limits(self, name: str, values: Mapping):
+        """Allowed and usual range of a physical quantity (``limits.Limits``)."""
+        return self.names.limits(name, values)
 
     def known_names(self) -> list[str]:
         """Examples of valid names, for messages."""
@@ -130,14 +177,27 @@ class Simulation(ABC):
         """Displacement and stress fields at `values` (outputs; not needed by a fit)."""
 
     @abstractmethod
-    def displacements_at(self, values: Mapping, points: np.ndarray) -> np.ndarray:
-        """(ux, uy) at points (k, 2) of the ground; ValueError for a point outside it."""
+    def stage_displacements(self, values: Mapping) -> np.ndarray:
+        """u_k on the free dofs after every construction stage (nstages, nfree)."""
+
+    def displacement(self, values: Mapping) -> np.ndarray:
+        """u on the free dofs after the last stage."""
+        return self.stage_displacements(values)[-1]
 
     def stage_displacements_at(self, values: Mapping, points: np.ndarray, stage: str) -> np.ndarray:
-        """(ux, uy) at points accumulated up to construction stage `stage`."""
-        if stage != self.stages[-1]:
-            raise ValueError(f"this simulation computes stage '{self.stages[-1]}' only, not '{stage}'")
-        return self.displacements_at(values, points)
+        """(ux, uy) at points (k, 2) of the ground accumulated up to construction stage `stage`;
+        ValueError for a point outside the ground or a stage the simulation does not compute."""
+        if stage not in self.stages:
+            computes = (f"stage '{self.stages[-1]}' only" if len(self.stages) == 1
+                        else f"stages {', '.join(self.stages)}")
+            raise ValueError(f"this simulation computes {computes}, not '{stage}'")
+        Ix, Iy = self.fe.interpolation(points)
+        u = self.stage_displacements(values)[self.stages.index(stage)]
+        return np.column_stack([Ix @ u, Iy @ u])
+
+    def displacements_at(self, values: Mapping, points: np.ndarray) -> np.ndarray:
+        """(ux, uy) at points (k, 2) of the ground after the last stage; ValueError for a point outside it."""
+        return self.stage_displacements_at(values, points, self.stages[-1])
 
     def lining_forces(self, values: Mapping):
         """Thrust, shear and bending moment around the lining per stage (``lining.LiningForces``);
@@ -192,28 +252,54 @@ class Simulation(ABC):
     def release(self) -> None:
         """Free memory held by factorisations (the simulation stays usable)."""
 
+    def replaying(self, values: Mapping) -> "Simulation":
+        """A simulation whose readings near `values` are the same discrete function of the values as
+        this one's at `values`, to take finite differences of (what the sensitivities are exact
+        derivatives of): this simulation itself when its discretisation does not depend on the values
+        (linear physics)."""
+        return self
+
     # ------------------------------------------------------------------ other instruments
-    SURVEY_CACHES: tuple[str, ...] = ()  # attributes holding results per survey row
+    def surveying(self, blocks) -> "Simulation":
+        """A view of the simulation reading other instruments (forecast points, candidate instruments):
+        a new simulation of the same domain with the survey of `blocks`, sharing the factorisations,
+        the remembered solutions (``SHARED``) and the counters; the simulation itself is untouched.
 
-    @contextmanager
-    def surveying(self, blocks):
-        """The simulation reading other instruments for a while (forecast points, candidate
-        instruments): the same mesh, factorisations and remembered solutions, another survey.
+            view = simulation.surveying(blocks)
+            q = view.predict(values, names, sensitivities=True)
 
-            with simulation.surveying(blocks) as sim:
-                q = sim.predict(values, names, sensitivities=True)
-        """
-        saved = {a: getattr(self, a) for a in ("survey",) + self.SURVEY_CACHES}
-        self.survey = build_survey(blocks, self.fe)
-        self._survey_changed(saved)
-        try:
-            yield self
-        finally:
-            for a, v in saved.items():
-                setattr(self, a, v)
+        A view is also a context manager (``with simulation.surveying(blocks) as view:``)."""
+        view = self._sharing()
+        view.domain = self.domain.reading(blocks)
+        view._survey_changed()
+        return view
 
-    def _survey_changed(self, saved: dict) -> None:
-        """Re-derive what SURVEY_CACHES hold for the new survey (`saved`: the old values)."""
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        return False
+
+    def __copy__(self):
+        """An independent simulation of the same domain, starting from this one's state: its
+        ``SHARED`` components copied, so that what it factorises, remembers or is set to is its own
+        (the counters stay shared)."""
+        new = self._sharing()
+        for name in self.SHARED:
+            setattr(new, name, copy.copy(getattr(self, name)))
+        return new
+
+    def _sharing(self):
+        """A new simulation object with this one's attributes (the components themselves shared)."""
+        other = object.__new__(type(self))
+        other.__dict__.update(self.__dict__)
+        return other
+
+    def _survey_changed(self) -> None:
+        """Re-derive what SURVEY_CACHES hold for a new survey (the old values still in place); by
+        default they are forgotten."""
+        for name in self.SURVEY_CACHES:
+            setattr(self, name, None)
 
 
 class Stopwatch:
@@ -231,16 +317,21 @@ class Stopwatch:
         return False
 
 
-def stage_survey(loaded, blocks, stages: list[str], fe) -> Survey:
-    """The survey of `blocks` on the FE model `fe` (default: every instrument of the case read at the
-    last stage); a block read at a stage the simulation does not compute is refused, located."""
-    from geoback.observation.instruments import build_survey, case_blocks
-
-    blocks = blocks if blocks is not None else [b.at(stages[-1]) for b in case_blocks(loaded)]
+def refuse_late_blocks(loaded, blocks, stages: list[str]) -> None:
+    """A block read at a stage the simulation does not compute is refused, located in the case."""
     late = [b for b in blocks if b.stage not in stages]
     if late:
         expected = (f"expected one of the construction stages ({', '.join(stages)})" if len(stages) > 1
                     else f"the case has one construction stage ('{stages[-1]}')")
         raise loaded.error(("instruments", late[0].index, "readings"),
                            f"readings of '{late[0].name}' at stage '{late[0].stage}': {expected}")
+
+
+def stage_survey(loaded, blocks, stages: list[str], fe) -> Survey:
+    """The survey of `blocks` on the FE model `fe` (default: every instrument of the case read at the
+    last stage); a block read at a stage the simulation does not compute is refused, located."""
+    from geoback.observation.instruments import build_survey, case_blocks
+
+    blocks = blocks if blocks is not None else [b.at(stages[-1]) for b in case_blocks(loaded)]
+    refuse_late_blocks(loaded, blocks, stages)
     return build_survey(blocks, fe)

@@ -34,6 +34,11 @@ Sensitivities (eqn 34, per configuration) dw_c/dv = K_c^-1 (df/dv - dK_c/dv w_c)
   otherwise dK_g/dv w_1 is formed (one back-substitution for w_1, one per value);
 - the lining's values: dK_1/dv = U dS/dv U^t, dS exact (lining.py): PW and Sigma serve, no sparse work;
 - beta[stage]: only the weights a_kc change (linear).
+
+Composition: the case's ``Domain`` (``domain.py``), the ground's ``FactorCache`` (``stiffness.py``)
+and, with a lining, its ``RingModel`` (``lining.py``) and ``LinedSystem`` (``lined_system.py``: the
+condensed and assembled forms); these are shared with views on other instruments (``surveying``),
+while the last solution and the condensation's readings view are kept per survey.
 """
 from __future__ import annotations
 
@@ -44,14 +49,15 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from geoback.case.loading import LoadedCase
-from geoback.case.construction import StagePlan
-from geoback.physics.elastic import ElasticSimulation, proportion
+from geoback.physics.domain import build_domain
 from geoback.physics.ground import COMPLEX_STEP
 from geoback.observation.instruments import InstrumentBlock
 from geoback.physics.lined_system import LinedSystem, Condensation, Interface
 from geoback.physics.lining import LiningForces, RingModel
 from geoback.physics.mesh import Mesh
-from geoback.physics.simulation import Field, Prediction
+from geoback.physics.names import Names
+from geoback.physics.simulation import Field, Prediction, Simulation
+from geoback.physics.stiffness import FactorCache, proportion
 
 _OPENBLAS = None
 
@@ -86,49 +92,30 @@ class _Solution:
     direct: tuple | None = None  # (factorisation, scale, w_1 on ground and inner lining dofs) when direct
 
 
-class StagedSimulation(LinedSystem, ElasticSimulation):
+class StagedSimulation(Simulation):
     """A case with a construction section: stages, an optional lining, readings at every stage."""
 
     reads_depth_offsets = False  # it observes with survey.P alone: no inclinometer depth offsets (zoff)
+    SHARED = ("stiffness", "lined_system")
+    SURVEY_CACHES = ("_sol", "_cond")
 
     def __init__(self, loaded: LoadedCase, mesh: Mesh | None = None, blocks: list[InstrumentBlock] | None = None,
                  extensions: Mapping | None = None, backend: str | None = None):
-        self.plan = StagePlan.of(loaded.case)
-        if blocks is not None:
-            late = [b for b in blocks if b.stage not in self.plan.names]
-            if late:
-                raise loaded.error(("instruments", late[0].index, "readings"),
-                                   f"readings of '{late[0].name}' at stage '{late[0].stage}': expected one of the "
-                                   f"construction stages ({', '.join(self.plan.names)})")
-        super().__init__(loaded, mesh=mesh, blocks=blocks, extensions=extensions, backend=backend)
+        domain = build_domain(loaded, mesh, blocks, backend, extensions)
+        super().__init__(domain, Names(domain.ground, domain.plan))
         t0 = time.perf_counter()
-        g = loaded.case.geometry
-        self.ring = RingModel(self.fe, self.plan.lining, g.width, g.depth) if self.plan.lining is not None else None
+        g, plan = loaded.case.geometry, domain.plan
+        self.ring = RingModel(self.fe, plan.lining, g.width, g.depth) if plan.lining is not None else None
         self.timings["lining"] = time.perf_counter() - t0
-        index = {n: k for k, n in enumerate(self.plan.names)}
-        self._row_stage = np.array([index[lab.stage] for lab in self.survey.labels], np.int64)
-        self._cond: Condensation | None = None
-        self._lfactor: tuple | None = None  # (coefficients, Factorisation) of the assembled lined matrix
-        self._wall_order: np.ndarray | None = None  # ground dofs, the wall's last (for its Schur complement)
-        self._ground_factors = 0  # distinct ground factorisations met (condensation pays only while 1)
-        self._last_ground = None
+        self.stiffness = FactorCache(domain.counters, backend)  # the ground's
+        self.lined_system = LinedSystem(self.fe, self.ring, domain.counters, backend) if self.ring is not None else None
+        self._cond: Condensation | None = None  # the lined configuration condensed, read by this survey
         self._sol: _Solution | None = None
 
-    # ------------------------------------------------------------------ names
     @property
-    def stages(self) -> list[str]:
-        return list(self.plan.names)
-
-    def quantities(self) -> dict[str, float]:
-        return {**self.ground.baseline(), **self.plan.quantities()}
-
-    def canonical(self, name: str) -> str | None:
-        if self.plan.knows(name):
-            return name
-        return self.ground.canonical(name)
-
-    def unit(self, name: str) -> str:
-        return self.plan.unit(name) or self.ground.unit(name)
+    def solver(self) -> str | None:
+        fact = self.stiffness.current
+        return fact.backend if fact is not None else None
 
     def _ground_values(self, values: Mapping) -> dict:
         """The values the ground reads (its extension table would take beta[stage] for 'beta')."""
@@ -140,32 +127,37 @@ class StagedSimulation(LinedSystem, ElasticSimulation):
         return self.ring is not None and 1 in self.plan.configurations
 
     # ------------------------------------------------------------------ the lined configuration
-    SURVEY_CACHES = ("_row_stage", "_sol", "_cond")
-
-    def _survey_changed(self, saved: dict) -> None:
-        index = {n: k for k, n in enumerate(self.plan.names)}
-        self._row_stage = np.array([index[lab.stage] for lab in self.survey.labels], np.int64)
+    def _survey_changed(self) -> None:
         self._sol = None
-        cond = saved["_cond"]
-        if cond is not None and self._factor is not None and cond.fact is self._factor[1]:
-            self._cond = Condensation(cond.fact, self._wall_view(cond.fact), cond.Sigma)  # the wall's Schur kept
+        cond = self._cond
+        if cond is not None and cond.fact is self.stiffness.current:  # the wall's Schur complement kept
+            self._cond = Condensation(cond.fact, self.lined_system.wall_view(cond.fact, self.survey.P), cond.Sigma)
         else:
             self._cond = None
 
+    def _condensation(self, fact) -> Condensation:
+        """Sigma and PW for the ground's current factorisation (reference coefficients)."""
+        if self._cond is None or self._cond.fact is not fact:
+            self._cond = self.lined_system.condensation(fact, self.stiffness.reference, self.survey.P)
+        return self._cond
+
     def release(self) -> None:
-        super().release()
-        if self._lfactor is not None:
-            self._lfactor[1].release()
-        self._lfactor, self._cond, self._sol = None, None, None
+        self.stiffness.release()
+        if self.lined_system is not None:
+            self.lined_system.release()
+        self._cond, self._sol = None, None
+
+    def _solve(self, fact, s: float, rhs, coords: np.ndarray | None = None) -> np.ndarray:
+        return self.stiffness.solve(fact, s, rhs, coords)
 
     # ------------------------------------------------------------------ forward
     def _solution(self, values: Mapping) -> _Solution:
         key = tuple(sorted(values.items()))
         sol = self._sol
-        if sol is not None and sol.key == key and self._factor is not None and self._factor[1] is sol.fact:
+        if sol is not None and sol.key == key and sol.fact is self.stiffness.current:
             return sol
         st = self.ground.state(self._ground_values(values))
-        fact, s = self._factorised(st.coeffs)
+        fact, s = self.stiffness.factorised(st.coeffs, lambda: self.fe.matrix(st.coeffs))
         self.counters.forward_runs += 1
         coords = np.concatenate([st.sigma_v, st.sigma_h])
         f = self.fe.load(st.sigma_v, st.sigma_h)
@@ -174,12 +166,11 @@ class StagedSimulation(LinedSystem, ElasticSimulation):
         Y = np.zeros((self.survey.m, 2))
         Y[:, 0] = P @ w0
         sol = _Solution(key, st, fact, s, coords, f, w0, Y, self.plan.weights(values))
-        if fact is not self._last_ground:
-            self._ground_factors += 1
-            self._last_ground = fact
         if self.lined:
             sol.ring_coeffs = self.ring.coefficients(values).real
-            if (self._cond is not None and self._cond.fact is fact) or self._ground_factors <= 1:
+            # condensed while the ground's factorisation is the first (or the condensation's own)
+            if (self._cond is not None and self._cond.fact is fact) or \
+                    (self.lined_system.condense and self.stiffness.made <= 1):
                 cond = self._condensation(fact)
                 S = self.ring.condensed(sol.ring_coeffs)
                 sol.interface = Interface(cond, s, S)
@@ -187,7 +178,7 @@ class StagedSimulation(LinedSystem, ElasticSimulation):
                 Y[:, 1] = Y[:, 0] - sol.interface.PW @ (S @ sol.z_w)
             else:  # the ground keeps changing: factorise the lined configuration itself
                 self._cond = None
-                lf, ls = self._lined_factorised(st.coeffs, sol.ring_coeffs)
+                lf, ls = self.lined_system.factorised(st.coeffs, sol.ring_coeffs)
                 rhs = np.concatenate([f, np.zeros(len(self.ring.i))])
                 wl = self._solve(lf, ls, rhs, coords)
                 sol.direct = (lf, ls, wl)
@@ -214,17 +205,13 @@ class StagedSimulation(LinedSystem, ElasticSimulation):
             out += np.outer(sol.a[:, 1], self._w1(sol))
         return out
 
-    def displacement(self, values: Mapping) -> np.ndarray:
-        """u on the free dofs after the last stage."""
-        return self.stage_displacements(values)[-1]
-
     def _readings(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
         with _sequential_blas():
             return self._readings_of(values, wrt)
 
     def _readings_of(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
         sol = self._solution(values)
-        rows = self._row_stage
+        rows = self.domain.row_stage
         x = np.einsum("ic,ic->i", sol.a[rows], sol.Y)
         if not wrt:
             return Prediction(x)
@@ -258,7 +245,7 @@ class StagedSimulation(LinedSystem, ElasticSimulation):
         if sol.direct is not None:  # K_L^-1 (-dK_ring w_1) on the assembled system
             lf, ls, wl = sol.direct
             n = len(wl)
-            rhs = -self.fe.symmetric_product(self._embed_ring(self.ring.fe.matrix(dcoeffs), n), wl)
+            rhs = -self.fe.symmetric_product(self.lined_system.embed_ring(self.ring.fe.matrix(dcoeffs), n), wl)
             return self.survey.P @ self._solve(lf, ls, rhs)[:self.fe.nfree]
         mu = self.ring.condensed_derivative(sol.ring_coeffs, dcoeffs) @ sol.z_w
         it = sol.interface  # q = -U mu: P K_g^-1 q = -PW mu, Sigma U^t K_g^-1 q = -mu
@@ -329,16 +316,11 @@ class StagedSimulation(LinedSystem, ElasticSimulation):
         return out
 
     # ------------------------------------------------------------------ fields and the lining
-    def stage_displacements_at(self, values: Mapping, points: np.ndarray, stage: str) -> np.ndarray:
-        Ix, Iy = self.fe.interpolation(points)
-        u = self.stage_displacements(values)[self.plan.names.index(stage)]
-        return np.column_stack([Ix @ u, Iy @ u])
-
     def _ring_unit(self, sol: _Solution) -> np.ndarray:
         """The ring's dofs (ring-local) per unit release on the lined configuration."""
         if sol.direct is not None:
             wl = sol.direct[2]
-            free = wl[self._augmented_index()]
+            free = wl[self.lined_system.augmented_index()]
             return self.ring.fe.expand(free)
         self.ring.condensed(sol.ring_coeffs)
         return self.ring.ring_displacement(sol.z_w)
@@ -367,7 +349,7 @@ class StagedSimulation(LinedSystem, ElasticSimulation):
         the wall was when it was installed plus its movement since."""
         U = self.stage_displacements(values)
         full = [self.fe.expand(u).reshape(-1, 2) for u in U]
-        stress = self.element_stress(self._ground_values(values), full[-1].ravel())
+        stress = self.domain.elastic_stress(self._ground_values(values), full[-1].ravel())
         cell = {"stress_xx": stress[:, 0], "stress_yy": stress[:, 1], "stress_xy": stress[:, 2]}
         if not self.lined:
             point = {f"displacement[{n}]": u for n, u in zip(self.stages, full)} if len(self.stages) > 1 else {}

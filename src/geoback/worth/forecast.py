@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from contextlib import nullcontext
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from types import SimpleNamespace
 
@@ -163,18 +163,26 @@ class ForecastModel:
         self.sim, self.specs = simulation, specs
         self.blocks = [s.block for s in specs if s.block is not None]
         self.lining = [s for s in specs if s.kind == "lining"]
+        self._view = None  # the simulation reading the forecasts' blocks, inside reading()
 
+    @contextmanager
     def reading(self):
-        """The context in which the simulation reads the forecasts' blocks (one view of the wall
-        and one set of interpolation rows for every evaluation)."""
-        return self.sim.surveying(self.blocks) if self.blocks else nullcontext()
+        """The context in which the model reads the forecasts' blocks through one view of the
+        simulation (``Simulation.surveying``: one view of the wall and one set of interpolation rows
+        for every evaluation); the simulation itself is left as it was."""
+        self._view = self.sim.surveying(self.blocks) if self.blocks else None
+        try:
+            yield self
+        finally:
+            self._view = None
 
     def __call__(self, values: dict, names: list[str] = (), sensitivities: bool = False):
         values = {k: v for k, v in values.items() if not is_constant(k)}
         physical = [n for n in names if not is_constant(n)]
         parts, jac = [], []
-        if self.blocks:  # inside reading(): the simulation reads the forecast blocks
-            pred = self.sim.predict(values, physical, sensitivities)
+        if self.blocks:  # through the view of reading() (or one made for this call)
+            view = self._view if self._view is not None else self.sim.surveying(self.blocks)
+            pred = view.predict(values, physical, sensitivities)
             parts.append(pred.x)
             jac.append(pred.A)
         if self.lining:
