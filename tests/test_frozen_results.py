@@ -19,12 +19,13 @@ pytestmark = pytest.mark.quick
 def test_identification_is_frozen_all_the_way_down(case):
     res = identify(prepare(load_case(CASES / case)), profile="none")
     fit, rel = res.fit, res.reliability
-    objects = [(res, "seconds"), (fit, "p"), (fit, "status"), (fit, "history"), (rel, "covariance"),
-               (rel, "error_scales"), (rel, "total_dof"), (rel.linear, "scale"), (rel.error_scales[0], "text")]
+    objects = [(res, "seconds"), (fit, "p"), (fit, "status"), (fit, "history"), (fit.history[0], "p"),
+               (rel, "covariance"), (rel, "error_scales"), (rel, "total_dof"), (rel.linear, "scale"),
+               (rel.error_scales[0], "text")]
     for obj, name in objects:
         with pytest.raises(dataclasses.FrozenInstanceError):
             setattr(obj, name, getattr(obj, name))
-    arrays = [fit.p, fit.x, fit.A, fit.at_bound, rel.p, rel.covariance, rel.std, rel.correlation,
+    arrays = [fit.p, fit.x, fit.A, fit.at_bound, fit.history[-1].p, rel.p, rel.covariance, rel.std, rel.correlation,
               rel.singular_values, rel.directions, rel.information_density, rel.leverage, rel.whitened_residual,
               rel.stated_residual, rel.information, rel.linear.covariance, rel.linear.std, rel.linear.rows]
     for a in arrays:

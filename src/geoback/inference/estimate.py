@@ -57,11 +57,17 @@ class Settings:
 
 @dataclass(frozen=True)
 class Iteration:
+    """One trial point of the fit: iteration k, the damping mu it was tried with (eqn 30), J there
+    (inf where the model could not be solved) and whether the step was accepted (J decreased)."""
+
     k: int
     mu: float
     J: float
     p: np.ndarray
     accepted: bool
+
+    def __post_init__(self):
+        object.__setattr__(self, "p", readonly(self.p))
 
 
 @dataclass(frozen=True)
@@ -169,7 +175,7 @@ def _iterate(misfit: Misfit, settings: Settings, method: str | None, p0: np.ndar
     J = ev.J
     B = ev.B * co.dp_dz(z)
     mu = 0.0 if method == "gn" else settings.mu0
-    history = [Iteration(0, mu, J, ev.p.copy(), True)]
+    history = [Iteration(0, mu, J, ev.p, True)]
     status, reason = "not converged", f"maximum number of iterations ({max_iterations}) reached"
     k = 0
     moved = False
@@ -202,7 +208,7 @@ def _iterate(misfit: Misfit, settings: Settings, method: str | None, p0: np.ndar
             except ForwardFailure:  # the model cannot be solved there (a non-linear run failed): a rejected step
                 J_new = np.inf
             accepted = J_new < J
-            history.append(Iteration(k, mu, J_new, p_new.copy(), accepted))
+            history.append(Iteration(k, mu, J_new, p_new, accepted))
             if progress:
                 progress(history[-1])
             if accepted:

@@ -154,7 +154,7 @@ class LinearAnalysis:
     def prediction_variance(self, G: np.ndarray) -> np.ndarray:
         """var q_i = g_i^t C_p g_i for each row g_i^t of G (eqn 55 propagated to first order);
         infinite for a prediction with a component above INVOLVED on an undetermined direction."""
-        G = np.asarray(G, float)
+        G = np.atleast_2d(np.asarray(G, float))
         v = np.einsum("ij,jk,ik->i", G, self.covariance, G)
         if self.undetermined.any():
             Gs = G * self.scale  # q = g^t p = (g d)^t z

@@ -67,7 +67,7 @@ class Discrimination:
                                                         self.power)]}
 
 
-@dataclass
+@dataclass(frozen=True)
 class _Fitted:
     """One hypothesis at its estimate: computed readings and whitened sensitivities, existing
     readings and each candidate's."""
