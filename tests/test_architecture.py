@@ -115,3 +115,51 @@ def test_fit_report_of_the_public_api(paper_case_path):
 
     text = geoback.fit_report(geoback.identify(geoback.load_case(paper_case_path)))
     assert "E[clay]" in text and "K0" in text
+
+
+def _calls(names: set[str]) -> dict[str, list[str]]:
+    """Files of src (the physics room aside: it inverts element Jacobians and factorises stiffness
+    matrices, never an information matrix or a reading's covariance) calling a function named in
+    `names` (np.linalg.inv(...), sla.cho_solve(...), inv(...)), with the lines."""
+    found: dict[str, list[str]] = {}
+    for path in sorted(SRC.rglob("*.py")):
+        rel = path.relative_to(ROOT).as_posix()
+        if rel.startswith("src/geoback/physics/"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call):
+                f = node.func
+                name = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+                if name in names:
+                    found.setdefault(rel, []).append(f"{node.lineno}: {name}")
+    return found
+
+
+def test_eqn_55_is_solved_in_one_place():
+    """C_p = (A'^t A' + C_p0^-1)^-1 (eqn 55) and every posterior made from it (predictions, a
+    candidate's data worth, the prior -> posterior table, replicates) come from
+    inference/linear_analysis.py: nothing else in src inverts a matrix."""
+    found = _calls({"inv", "pinv", "cho_solve", "cho_factor", "lu_factor", "lu_solve"})
+    assert set(found) <= {"src/geoback/inference/linear_analysis.py"}, found
+    # and the detector finds an inversion where there is one (the physics' element Jacobians)
+    assert "inv" in (SRC / "physics" / "fem.py").read_text()
+    users = ("inference/reliability.py", "inference/replicates.py", "inference/identifiability.py",
+             "worth/design.py", "worth/forecast.py")
+    for module in users:
+        text = (SRC / module).read_text()
+        assert "LinearAnalysis" in text or "posterior(" in text or ".linear" in text, module
+
+
+def test_readings_are_whitened_and_noise_drawn_only_by_the_seam():
+    """Factors of a covariance and triangular solves with them live in the seam (inference/misfit.py:
+    the survey's L, a candidate block's L_c, noise L z) and where cholesky_factor is defined and a
+    case's C_x is validated (case/); besides them only the LM step factorises its damped normal
+    matrix (inference/estimate.py) and the forecast's sampling check factorises C_p to draw parameter
+    sets (worth/forecast.py). Random normal draws: the readings' noise (seam) and those parameter sets."""
+    factor_sites = {"src/geoback/case/covariance.py", "src/geoback/case/checks.py", "src/geoback/inference/misfit.py",
+                    "src/geoback/inference/estimate.py", "src/geoback/worth/forecast.py"}
+    found = _calls({"cholesky", "cholesky_factor", "solve_triangular", "dtrtrs", "_trtrs"})
+    assert set(found) <= factor_sites, found
+    assert set(found) >= {"src/geoback/inference/misfit.py"}
+    noise = _calls({"standard_normal", "normal", "multivariate_normal"})
+    assert set(noise) <= {"src/geoback/inference/misfit.py", "src/geoback/worth/forecast.py"}, noise

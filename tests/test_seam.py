@@ -95,3 +95,48 @@ def test_reports_and_figures_run_no_model(tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["factorisations"] == 1
     assert summary["exploration"]["factorisations"] == 0  # K = E k: the fit's factorisation served it
+
+
+def test_one_instrument_is_whitened_as_the_survey_whitens_it(paper):
+    """whiten_block (a candidate instrument's rows, or one block of the data) is L_i^-1 v with the
+    block's own Cholesky factor: the rows Misfit.whiten gives that block, for readings and sensitivities."""
+    from dataclasses import replace
+
+    from geoback.case.covariance import NotPositiveDefinite
+    from geoback.inference.misfit import block_factor, whiten_block
+
+    mis = paper.misfit
+    assert mis.weighting == "full"
+    ev = mis.evaluate(np.array([8000.0, 0.8]), jacobian=True)
+    for block, rows in mis.data.block_rows():
+        C = mis.data.covariance[rows, rows]
+        np.testing.assert_array_equal(block_factor(block, C), np.linalg.cholesky(C))
+        r = mis.data.measured[rows] - ev.x[rows]
+        np.testing.assert_allclose(whiten_block(block, r, C), ev.r[rows], rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(whiten_block(block, ev.A[rows], C), ev.B[rows], rtol=1e-13,
+                                   atol=1e-13 * np.abs(ev.B[rows]).max())
+        np.testing.assert_allclose(np.linalg.cholesky(C) @ whiten_block(block, ev.A[rows], C), ev.A[rows],
+                                   rtol=1e-12, atol=1e-14 * np.abs(ev.A[rows]).max())
+    bad = replace(mis.data.blocks[0], covariance=-np.eye(mis.data.blocks[0].m))
+    with pytest.raises(NotPositiveDefinite, match=bad.name):
+        whiten_block(bad, np.ones(bad.m))
+
+
+@pytest.mark.parametrize("case", ["tunnel-paper.yaml", "staged-tunnel.yaml", "concealed/null-1.yaml"])
+def test_noise_is_drawn_in_one_place_on_the_seeded_stream(case):
+    """block_noise draws L_i z per instrument in survey order, z = rng.standard_normal(m_i), with the
+    factor np.linalg.cholesky gives (bitwise): the stream the shipped readings were generated with
+    (synthetic_readings) and the one Data.noise draws."""
+    from geoback.inference.misfit import Data, block_factor, block_noise
+
+    sim = prepare(load_case(CASES / case), with_readings=False).simulation
+    blocks = sim.survey.blocks
+    for b in blocks:
+        np.testing.assert_array_equal(block_factor(b), np.linalg.cholesky(b.covariance))
+    old_rng, new_rng = np.random.default_rng(7), np.random.default_rng(7)
+    old = np.concatenate([np.linalg.cholesky(b.covariance) @ old_rng.standard_normal(b.m) for b in blocks])
+    new = np.concatenate([block_noise(b, new_rng) for b in blocks])
+    np.testing.assert_array_equal(new, old)
+    data = Data.build(blocks, np.zeros(len(old)))
+    np.testing.assert_array_equal(data.noise(np.random.default_rng(7)), old)
+    np.testing.assert_array_equal(data.noise(np.random.default_rng(7), scale=2.0), 2.0 * old)

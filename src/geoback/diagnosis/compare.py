@@ -19,6 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from geoback.case.covariance import NotPositiveDefinite
+from geoback.inference.misfit import whiten_block
+
 EQUAL_AIC = 2.0  # within this many AIC units two hypotheses explain the readings about equally
 POWER = 0.8
 
@@ -76,11 +79,10 @@ def separation(a, b, data, top: int = 5) -> Separation:
     rows = []
     for block, sl in data.block_rows():
         db = d[sl]
-        cov = data.covariance[sl, sl]
         try:
-            w = np.linalg.solve(np.linalg.cholesky(cov), db)
+            w = whiten_block(block, db, data.covariance[sl, sl])
             chi2 = float(w @ w)
-        except np.linalg.LinAlgError:
+        except (NotPositiveDefinite, np.linalg.LinAlgError):
             chi2 = float(np.sum((db / sigma[sl]) ** 2))
         out.instruments.append({"instrument": block.name, "kind": block.kind, "chi2": chi2, "readings": block.m})
         for k, lab in enumerate(block.labels):

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from geoback.errors import ForwardFailure
+from geoback.inference.frozen import readonly
 from geoback.inference.misfit import Misfit
 from geoback.inference.parameters import ParameterSet
 
@@ -56,26 +57,51 @@ class Settings:
 
 @dataclass(frozen=True)
 class Iteration:
+    """One trial point of the fit: iteration k, the damping mu it was tried with (eqn 30), J there
+    (inf where the model could not be solved) and whether the step was accepted (J decreased)."""
+
     k: int
     mu: float
     J: float
     p: np.ndarray
     accepted: bool
 
+    def __post_init__(self):
+        object.__setattr__(self, "p", readonly(self.p))
 
-@dataclass
+
+@dataclass(frozen=True)
 class Fit:
+    """What the optimiser found (eqns 27-30): a frozen value, built complete by ``fit``; read-only arrays.
+
+    - ``p``: the estimate, the last accepted point (physical units).
+    - ``J``: J(p) = r^t r, the whitened sum of squares with the prior rows (eqns 6, 9; the profiled
+      objective S* when error scales are estimated).
+    - ``x``: the computed readings x(p); ``A``: their sensitivity dx/dp at p (eqns 34-42, physical units).
+    - ``history``: every trial point (``Iteration``: iteration k, damping mu, J, p, accepted), in order.
+    - ``status``: 'converged' or 'not converged'; ``reason``: why the loop stopped, in words.
+    - ``method``: 'lm' (eqn 30), 'lm-scaled' (Marquardt) or 'gn' (eqn 28).
+    - ``iterations``: iterations made (over all refits from the optimum while the misfit settled).
+    - ``at_bound``: which parameters ended on a bound.
+    - ``moved``: False when stuck at the initial values (no step decreased J, yet J was not at a minimum).
+    """
+
     p: np.ndarray
     J: float
     x: np.ndarray
     A: np.ndarray  # dx/dp at p (physical units)
-    history: list[Iteration]
+    history: tuple[Iteration, ...]
     status: str  # "converged" | "not converged"
     reason: str
     method: str
     iterations: int
     at_bound: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     moved: bool = True  # False: stuck at the initial values (no step decreased J, yet J was not at a minimum)
+
+    def __post_init__(self):
+        object.__setattr__(self, "history", tuple(self.history))
+        for name in ("p", "x", "A", "at_bound"):
+            object.__setattr__(self, name, readonly(getattr(self, name)))
 
 
 class _Coordinates:
@@ -125,10 +151,9 @@ def fit(misfit: Misfit, settings: Settings = Settings(), method: str | None = No
         warm = replace(settings, mu0=max(mu, 1e-12 * settings.mu0))
         shown = (lambda it, k0=result.iterations: progress(replace(it, k=it.k + k0))) if progress else None
         again = _iterate(misfit, warm, method, result.p, max_iterations, shown)
-        again.history = result.history + [replace(h, k=h.k + result.iterations) for h in again.history]
-        again.iterations += result.iterations
-        again.moved = again.moved or result.moved
-        result = again
+        result = replace(again, history=result.history + tuple(replace(h, k=h.k + result.iterations)
+                                                               for h in again.history),
+                         iterations=again.iterations + result.iterations, moved=again.moved or result.moved)
     return result
 
 
@@ -150,7 +175,7 @@ def _iterate(misfit: Misfit, settings: Settings, method: str | None, p0: np.ndar
     J = ev.J
     B = ev.B * co.dp_dz(z)
     mu = 0.0 if method == "gn" else settings.mu0
-    history = [Iteration(0, mu, J, ev.p.copy(), True)]
+    history = [Iteration(0, mu, J, ev.p, True)]
     status, reason = "not converged", f"maximum number of iterations ({max_iterations}) reached"
     k = 0
     moved = False
@@ -183,7 +208,7 @@ def _iterate(misfit: Misfit, settings: Settings, method: str | None, p0: np.ndar
             except ForwardFailure:  # the model cannot be solved there (a non-linear run failed): a rejected step
                 J_new = np.inf
             accepted = J_new < J
-            history.append(Iteration(k, mu, J_new, p_new.copy(), accepted))
+            history.append(Iteration(k, mu, J_new, p_new, accepted))
             if progress:
                 progress(history[-1])
             if accepted:

@@ -6,7 +6,8 @@ without the prior rows) and a prior std s0_j for every parameter,
 
     C_post = (I + diag(1 / s0^2))^-1,     identifiability_j = 1 - C_post,jj / s0_j^2,
 
-0 when the readings add nothing to the prior, 1 when they fix the parameter far better than the
+(eqn 55 with that prior, solved by ``linear_analysis.LinearAnalysis.from_information``): 0 when
+the readings add nothing to the prior, 1 when they fix the parameter far better than the
 prior did. The prior is the case's where it gives one; otherwise an uninformed one spanning the
 quantity's usual range for ground (``limits``) as its 95 % interval: in ln p for positive
 quantities (std ln(hi / lo) / 3.92, taken at the estimate: s0 = p ln(hi / lo) / 3.92), else in p.
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from geoback.inference.linear_analysis import LinearAnalysis
 from geoback.inference.reliability import Z95
 
 
@@ -63,7 +65,6 @@ def prior_std(params, p: np.ndarray, limits) -> tuple[np.ndarray, list[str]]:
 def prior_posterior(information: np.ndarray, params, p: np.ndarray, limits) -> PriorPosterior:
     """Prior and posterior std of every parameter given the readings' information A'^t A'."""
     s0, source = prior_std(params, p, limits)
-    M = np.asarray(information, float) + np.diag(1.0 / s0 ** 2)
-    scale = 1.0 / np.sqrt(np.diag(M))  # equilibrated inverse: the information spans many decades
-    C = np.linalg.inv(M * np.outer(scale, scale)) * np.outer(scale, scale)
-    return PriorPosterior(list(params.names), s0, source, np.sqrt(np.clip(np.diag(C), 0, None)))
+    # eqn 55 with the prior C_0 = diag(s0^2): equilibrated, the information spans many decades
+    posterior = LinearAnalysis.from_information(np.asarray(information, float) + np.diag(1.0 / s0 ** 2))
+    return PriorPosterior(list(params.names), s0, source, posterior.std)

@@ -274,9 +274,8 @@ def identify(case, method: str | None = None, progress=None, weighting: str | No
     t2 = time.perf_counter()
     out = conclude(misfit, result, analysis.case, analysis.loaded.digest(), counts,
                    dict(sim.timings, setup=t1 - t0, fit=t2 - t1), analysis.settings, profile, notices)
-    out.seconds["assess"] = time.perf_counter() - t2
-    return replace(out, mesh_error=merr, mesh_error_included=mode == "include" and merr is not None
-                   and not merr.skipped)
+    return replace(out, seconds={**out.seconds, "assess": time.perf_counter() - t2}, mesh_error=merr,
+                   mesh_error_included=mode == "include" and merr is not None and not merr.skipped)
 
 
 def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, seconds: dict,

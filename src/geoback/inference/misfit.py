@@ -6,7 +6,9 @@
 blockdiag(C_x,i) over instruments (eqn 9); ``Misfit`` adds a simulation and the parameters and is
 the only place where anything is whitened: an ``Evaluation`` carries the whitened residual
 r' = L^-1 (x* - x) and sensitivity A' = L^-1 A, with the prior rows appended, in physical units.
-The optimiser, the reliability measures and `diagnose` see nothing but this object.
+The optimiser, the reliability measures and `diagnose` see nothing but this object. An instrument
+outside the survey (a candidate of `design`) is whitened here too, by its own factor L_c
+(``whiten_block``), and noise N(0, C_x) is drawn here, block by block (``block_noise``).
 
 Error scales (eqns 5 and 10, ``scales.py``): where the case says an instrument's sigma is known
 only up to a factor k, the misfit profiles k^2 in closed form at every p and re-weights: the
@@ -69,9 +71,10 @@ class Data:
         return out
 
     def noise(self, rng: np.random.Generator, scale: float = 1.0) -> np.ndarray:
-        """A draw from N(0, C_x): every instrument's readings with its own covariance (eqn 10)."""
-        return scale * np.concatenate([cov.cholesky_factor(self.covariance[rows, rows], b.name)
-                                       @ rng.standard_normal(b.m) for b, rows in self.block_rows()])
+        """A draw from N(0, C_x): every instrument's readings with its own covariance (eqn 10),
+        block by block in survey order (``block_noise``)."""
+        return scale * np.concatenate([block_noise(b, rng, self.covariance[rows, rows])
+                                       for b, rows in self.block_rows()])
 
     def with_measured(self, measured: np.ndarray) -> "Data":
         """The same instruments and covariance with other readings; the covariance's factors, a
@@ -106,8 +109,44 @@ def weighting_factor(data: Data, weighting: str) -> np.ndarray:
         return np.eye(data.m)
     if weighting == "diagonal":
         return np.diag(np.sqrt(np.diag(data.covariance)))
-    factors = [cov.cholesky_factor(data.covariance[rows, rows], b.name) for b, rows in data.block_rows()]
+    factors = [block_factor(b, data.covariance[rows, rows]) for b, rows in data.block_rows()]
     return sla.block_diag(*factors)
+
+
+# ---------------------------------------------------------------------- one instrument's covariance factor
+def block_factor(block: InstrumentBlock, covariance: np.ndarray | None = None) -> np.ndarray:
+    """Lower-triangular L_i with L_i L_i^t = C_x,i, one instrument's covariance (eqns 10-20): the
+    block's own, or `covariance` (its C_x with identified constants removed, as ``Data`` holds it).
+    By ``cholesky_factor``, which names the block when C_x,i is not positive definite."""
+    return cov.cholesky_factor(block.covariance if covariance is None else covariance, block.name)
+
+
+def whiten_block(block: InstrumentBlock, v: np.ndarray, covariance: np.ndarray | None = None) -> np.ndarray:
+    """L_i^-1 v for one instrument's readings outside the survey (a candidate instrument, or one
+    instrument's rows of the data): v is a vector of its readings (r' = L_i^-1 r) or a matrix whose
+    rows are its readings (A_c' = L_i^-1 A_c), whitened as ``Misfit.whiten`` whitens the survey's."""
+    return solve_lower(np.asfortranarray(block_factor(block, covariance)), np.asarray(v, float))
+
+
+def block_noise(block: InstrumentBlock, rng: np.random.Generator, covariance: np.ndarray | None = None) -> np.ndarray:
+    """A draw from N(0, C_x,i) for one instrument's readings (eqn 10): L_i z with z =
+    rng.standard_normal(block.m), L_i from ``block_factor`` (so a seed gives the same readings
+    wherever noise is drawn: ``Data.noise``, ``synthetic_readings``)."""
+    return block_factor(block, covariance) @ rng.standard_normal(block.m)
+
+
+def solve_lower(Lf: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """L^-1 v for a lower-triangular L (Fortran order) and v a vector or the columns of a matrix,
+    by LAPACK's triangular solve called directly (scipy's wrapper costs ten times the solve on small
+    systems), column by column (BLAS's multi-right-hand-side solve spends ~1 ms starting threads on
+    small ones)."""
+    if v.ndim == 1:
+        x, info = _trtrs(Lf, v, lower=1)
+        return x
+    out = np.empty(v.shape)
+    for j in range(v.shape[1]):
+        out[:, j] = _trtrs(Lf, v[:, j], lower=1)[0]
+    return out
 
 
 @dataclass(frozen=True)
@@ -247,16 +286,9 @@ class Misfit:
 
     # ------------------------------------------------------------------ the one place that whitens
     def whiten(self, v: np.ndarray) -> np.ndarray:
-        """L^-1 v (v: a vector or the columns of a matrix of readings), by LAPACK's triangular solve
-        called directly (scipy's wrapper costs ten times the solve on small systems), column by
-        column (BLAS's multi-right-hand-side solve spends ~1 ms starting threads on small ones)."""
-        if v.ndim == 1:
-            x, info = _trtrs(self._Lf, v, lower=1)
-            return x
-        out = np.empty(v.shape)
-        for j in range(v.shape[1]):
-            out[:, j] = _trtrs(self._Lf, v[:, j], lower=1)[0]
-        return out
+        """L^-1 v (v: a vector or the columns of a matrix of readings; ``solve_lower``). An
+        instrument outside the survey (a candidate) is whitened by ``whiten_block``."""
+        return solve_lower(self._Lf, v)
 
     # ------------------------------------------------------------------ evaluation
     @property

@@ -1,6 +1,7 @@
 """Reliability of the estimate (eqns 43-55, whitened as in ERRATA.md).
 
-With C_x = L L^t and A' = L^-1 A: C_p = (A'^t A' + C_p0^-1)^-1 (eqn 55), Q = A' C_p A'^t
+With C_x = L L^t and A' = L^-1 A: C_p = (A'^t A' + C_p0^-1)^-1 (eqn 55, solved by
+``linear_analysis.LinearAnalysis``, kept in the result as ``Reliability.linear``), Q = A' C_p A'^t
 (information density; symmetric, idempotent without priors, trace = n), the SVD A' = U S V^t
 (eqns 44-49) on relative parameter changes dp/p, chi^2 = J_min on m - n degrees of freedom,
 and -2 ln L (eqn 5) for AIC and BIC.
@@ -14,22 +15,56 @@ Student t / F quantiles on the Satterthwaite degrees of freedom that the scales'
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
+from dataclasses import dataclass
 
 import numpy as np
 
 from geoback.inference import chi2
+from geoback.inference.frozen import readonly
+from geoback.inference.linear_analysis import LinearAnalysis
 from geoback.inference import scale_estimates as se
 from geoback.inference import scales as sc
 
 Z95 = 1.959963984540054  # standard normal quantile at 0.975
-ILL_CONDITIONED = 1e-8  # smallest / largest singular value below which a combination is undetermined
 
 
-@dataclass
+@dataclass(frozen=True)
 class Reliability:
-    names: list[str]
+    """What eqns 43-55 say about an estimate p (computed complete by ``assess``; read-only arrays).
+
+    With the whitened sensitivity A' = L^-1 A and residual r' = L^-1 (x* - x) at p (C_x = L L^t,
+    re-weighted by the estimated error scales where there are any), m readings, n parameters:
+
+    - ``names``, ``p``: the parameters and the estimate.
+    - ``linear``: the linear analysis at p (``linear_analysis.LinearAnalysis`` of the rows
+      [A'; C_p0^-1/2] equilibrated by |p|), from which the next four come.
+    - ``covariance``: C_p = (A'^t A' + C_p0^-1)^-1, eqn 55 (over the determined directions).
+    - ``std``: sqrt(diag C_p); inf for a parameter in an undetermined combination.
+    - ``correlation``: C_p,ij / (std_i std_j) (nan where a std is infinite; 1 on the diagonal).
+    - ``undetermined``: in words, the combinations (of relative changes dp/p) the readings and
+      priors do not fix: singular values below ILL_CONDITIONED times the largest.
+    - ``singular_values``, ``directions``: the SVD A' diag(|p|) = U S V^t of the readings alone
+      (eqns 44-49, sensitivity to relative changes): S and the columns of V.
+    - ``condition``: s_1 / s_n of that SVD (inf when s_n = 0).
+    - ``information_density``: Q = A'_r C_z A'_r^t (m x m; A'_r = A' diag(|p|), C_z = C_p / (|p| |p|^t)),
+      symmetric, idempotent without priors, trace n (ERRATA, Q); ``leverage`` its diagonal.
+    - ``whitened_residual``: r' at p.
+    - ``chi2``, ``dof``, ``p_value``: chi^2 = J_min (readings and priors) on m - n + (priors)
+      degrees of freedom and P(chi^2_dof > chi2); with estimated scales, the readings whose sigma
+      is known and the priors, on Satterthwaite's dof (module docstring).
+    - ``minus2logL``: -2 ln L = J (or the support function S*, maximised over the scales) +
+      ln |C_x| + m ln 2 pi (eqn 5); ``aic`` = -2 ln L + 2k, ``bic`` = -2 ln L + k ln m, k = n plus
+      the estimated scales.
+    - ``error_scales``: ``scale_estimates.ScaleEstimate`` per group of readings (eqn 10).
+    - ``parameter_dof``: Satterthwaite dof of each std (None: every scale known).
+    - ``ellipse_dof``: denominator dof of the parameters' F ellipse (inf: every scale known).
+    - ``total_dof``: readings + priors - parameters.
+    - ``stated_residual``: L^-1 (x* - x) with the stated C_x; ``stated_J``: J with every scale at 1.
+    - ``log``: parameters identified as ln p (their intervals are made in log space).
+    - ``information``: A'^t A' of the readings alone (no prior rows), physical units.
+    """
+
+    names: tuple[str, ...]
     p: np.ndarray
     covariance: np.ndarray
     std: np.ndarray
@@ -41,13 +76,13 @@ class Reliability:
     leverage: np.ndarray  # diag Q
     whitened_residual: np.ndarray
     chi2: float
-    dof: int
+    dof: float
     p_value: float
     minus2logL: float
     aic: float
     bic: float
-    undetermined: list[str]  # plain-words description of combinations the readings cannot fix
-    error_scales: list = field(default_factory=list)  # scales.ScaleEstimate per group of readings
+    undetermined: tuple[str, ...]  # plain-words description of combinations the readings cannot fix
+    error_scales: tuple = ()  # scale_estimates.ScaleEstimate per group of readings
     parameter_dof: np.ndarray | None = None  # Satterthwaite dof of each std (None: every scale known)
     ellipse_dof: float = float("inf")  # denominator dof of the parameters' F ellipse
     total_dof: float = 0  # readings + priors - parameters
@@ -55,6 +90,17 @@ class Reliability:
     stated_J: float = float("nan")  # J with every scale at 1 (data and priors)
     log: np.ndarray | None = None  # parameters identified as ln p: their intervals are made in log space
     information: np.ndarray | None = None  # A'^t A' of the readings alone (no prior rows), physical units
+    linear: LinearAnalysis | None = None  # the posterior at p (eqn 55): covariance, predictions, data worth
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "names", tuple(self.names))
+        set_(self, "undetermined", tuple(self.undetermined))
+        set_(self, "error_scales", tuple(self.error_scales))
+        for name in ("p", "covariance", "std", "correlation", "singular_values", "directions",
+                     "information_density", "leverage", "whitened_residual", "parameter_dof", "stated_residual",
+                     "log", "information"):
+            set_(self, name, readonly(getattr(self, name)))
 
     @property
     def reduced_chi2(self) -> float:
@@ -111,6 +157,17 @@ def combination_text(names: list[str], v: np.ndarray) -> str:
     return text[2:] if text.startswith("+ ") else text
 
 
+def relative_scale(p: np.ndarray) -> np.ndarray:
+    """|p| (1 where p = 0): the reliability measures are made on relative parameter changes dp/p."""
+    return np.where(np.abs(p) > 0, np.abs(p), 1.0)
+
+
+def posterior(ev, params) -> LinearAnalysis:
+    """The linear analysis at the misfit's Evaluation `ev` (eqn 55): the whitened readings' rows A'
+    and the prior rows C_p0^-1/2, equilibrated by |p| (relative changes)."""
+    return LinearAnalysis.from_rows(ev.whitened_sensitivity, params.prior_precision(), relative_scale(ev.p))
+
+
 def assess(ev, params, logdet: float) -> Reliability:
     """Everything eqns 43-55 say about the optimum: `ev` is the misfit's Evaluation there (whitened
     residual r' and sensitivity A', prior rows), `logdet` = ln det of the weighting covariance."""
@@ -118,55 +175,46 @@ def assess(ev, params, logdet: float) -> Reliability:
     Aw, rw = ev.whitened_sensitivity, ev.whitened_residual
     m, n = Aw.shape
     prec = params.prior_precision()
-    scale = np.where(np.abs(p) > 0, np.abs(p), 1.0)
+    la = posterior(ev, params)
+    scale = la.scale
     As = Aw * scale  # sensitivity to relative changes dp/p
     U, s, Vt = np.linalg.svd(As, full_matrices=False)
     cond = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
-    # the prior adds rows sqrt(C_p0^-1) to the (relative) sensitivity: C_p = (A'^t A' + C_p0^-1)^-1
-    aug = np.vstack([As, np.diag(np.sqrt(prec) * scale)])
-    _, sa, Vta = np.linalg.svd(aug, full_matrices=False)
-    tiny = sa <= ILL_CONDITIONED * sa[0]
-    undetermined = [combination_text(names, Vta[i]) for i in np.flatnonzero(tiny)]
-    inv2 = np.where(tiny, 0.0, 1.0 / np.where(tiny, 1.0, sa) ** 2)
-    Cs = (Vta.T * inv2) @ Vta
-    Cp = Cs * np.outer(scale, scale)
-    std = np.sqrt(np.clip(np.diag(Cp), 0, None))
-    if tiny.any():  # undetermined combinations: their members' std is unbounded
-        involved = np.abs(Vta[tiny]).max(axis=0) > 0.05
-        std = np.where(involved, np.inf, std)
+    undetermined = [combination_text(names, v) for v in la.undetermined_directions]
+    Cp, std = la.covariance, la.std
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = Cp / np.outer(std, std)
     corr[~np.isfinite(corr)] = np.nan
     np.fill_diagonal(corr, 1.0)
-    Q = As @ Cs @ As.T
-    chi2 = ev.J  # data and priors: the priors are observations too (dof counts them)
-    dof = m - n + int(np.count_nonzero(prec))
-    pval = chi2_sf(chi2, dof)
-    m2logL = chi2 + logdet + m * np.log(2 * np.pi)
+    Q = As @ la.scaled_covariance @ As.T
+    leverage = np.diag(Q).copy()
     groups = tuple(getattr(ev, "groups", ()) or ())
     state = getattr(ev, "scales", None)
-    leverage = np.diag(Q).copy()
+    common = dict(names=names, p=p, covariance=Cp, std=std, correlation=corr, singular_values=s, directions=Vt.T,
+                  condition=cond, information_density=Q, leverage=leverage, whitened_residual=rw,
+                  undetermined=undetermined, log=np.asarray(params.log, bool), information=Aw.T @ Aw, linear=la)
     if state is None:
-        rel = Reliability(list(names), p, Cp, std, corr, s, Vt.T, cond, Q, leverage, rw.copy(), chi2, dof,
-                          pval, float(m2logL), float(m2logL + 2 * n), float(m2logL + n * np.log(m)), undetermined,
-                          log=np.asarray(params.log, bool), information=Aw.T @ Aw)
-        rel.total_dof, rel.stated_residual, rel.stated_J = dof, rel.whitened_residual, chi2
+        chi2 = ev.J  # data and priors: the priors are observations too (dof counts them)
+        dof = m - n + int(np.count_nonzero(prec))
+        m2logL = float(chi2 + logdet + m * np.log(2 * np.pi))
+        scales = []
         if groups:  # what each instrument's readings say about its stated sigma
             known = sc.profile_state(groups, rw, np.zeros(len(groups)))
-            rel.error_scales = se.group_estimates(known, sc_leverage(groups, leverage))
-        return rel
-    return _assess_with_scales(ev, params, logdet, groups, state, names, p, Cp, std, corr, s, Vt.T, cond, Q,
-                               leverage, aug, Cs, scale, tiny, undetermined, dof)
+            scales = se.group_estimates(known, sc_leverage(groups, leverage))
+        return Reliability(**common, chi2=chi2, dof=dof, p_value=chi2_sf(chi2, dof), minus2logL=m2logL,
+                           aic=float(m2logL + 2 * n), bic=float(m2logL + n * np.log(m)), error_scales=scales,
+                           total_dof=dof, stated_residual=rw, stated_J=chi2)
+    return Reliability(**common, **_with_scales(ev, params, logdet, groups, state, la, leverage,
+                                                m - n + int(np.count_nonzero(prec))))
 
 
 def sc_leverage(groups, leverage: np.ndarray) -> np.ndarray:
     return np.array([float(leverage[g.rows].sum()) for g in groups])
 
 
-def _assess_with_scales(ev, params, logdet, groups, state, names, p, Cp, std, corr, s, V, cond, Q, leverage, aug, Cs,
-                        scale, tiny, undetermined, total_dof) -> Reliability:
-    """The reliability measures when error scales are estimated (see the module docstring)."""
-    m, n = ev.m, len(p)
+def _with_scales(ev, params, logdet, groups, state, la: LinearAnalysis, leverage, total_dof) -> dict:
+    """The reliability measures that differ when error scales are estimated (module docstring)."""
+    m, n = ev.m, len(ev.p)
     rw = ev.whitened_residual
     h = sc_leverage(groups, leverage)
     estimates = se.group_estimates(state, h)
@@ -178,7 +226,8 @@ def _assess_with_scales(ev, params, logdet, groups, state, names, p, Cp, std, co
     prior_r = ev.r[m:]
     chi2 = float(rw[known_rows] @ rw[known_rows] + prior_r @ prior_r)
     if len(rows):
-        full = aug @ Cs @ aug.T  # Q over readings and prior rows (relative parameter scaling cancels)
+        aug = la.rows
+        full = aug @ la.scaled_covariance @ aug.T  # Q over readings and prior rows (relative scaling cancels)
         M = np.eye(len(rows)) - full[np.ix_(rows, rows)]
         t1, t2 = float(np.trace(M)), float(np.sum(M * M))
         dof = t1
@@ -192,13 +241,10 @@ def _assess_with_scales(ev, params, logdet, groups, state, names, p, Cp, std, co
     B = ev.whitened_sensitivity
     infos = se.group_information(groups, B)
     nus = np.array([g.information(u, J) if g.estimated else np.inf for g, u, J in zip(groups, state.u, state.J)])
-    pdof = se.satterthwaite_dof(Cp, infos, nus) if not tiny.any() else np.full(n, np.inf)
+    pdof = se.satterthwaite_dof(la.covariance, infos, nus) if not la.undetermined.any() else np.full(n, np.inf)
     edof = se.ellipse_dof(h, nus, n)
     stated = ev.stated_residual
     k = n + n_scales
-    rel = Reliability(list(names), p, Cp, std, corr, s, V, cond, Q, leverage, rw.copy(), chi2, dof, pval,
-                      float(m2logL), float(m2logL + 2 * k), float(m2logL + k * np.log(m)), undetermined,
-                      estimates, pdof, edof, total_dof, stated, float(stated @ stated + prior_r @ prior_r),
-                      log=np.asarray(params.log, bool), information=B.T @ B)
-    return rel
-
+    return dict(chi2=chi2, dof=dof, p_value=pval, minus2logL=float(m2logL), aic=float(m2logL + 2 * k),
+                bic=float(m2logL + k * np.log(m)), error_scales=estimates, parameter_dof=pdof, ellipse_dof=edof,
+                total_dof=total_dof, stated_residual=stated, stated_J=float(stated @ stated + prior_r @ prior_r))

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geoback.inference.estimate import fit
-from geoback.inference.reliability import assess
+from geoback.inference.reliability import assess, posterior
 
 
 @dataclass(frozen=True)
@@ -72,17 +72,15 @@ def identify_replicates(analysis, measured: np.ndarray, method: str | None = Non
             if est:  # the scales estimated at this replicate's optimum, C_p with them, the F ellipse
                 mis = mis.anchored(f.p)
                 rel = assess(mis.evaluate(f.p, jacobian=True), mis.parameters, mis.logdet)
+                la = rel.linear
                 K[i] = [rel.error_scales[k].factor for k in est]
                 lo[i] = [rel.error_scales[k].low for k in est]
                 hi[i] = [rel.error_scales[k].high for k in est]
                 dof[i] = [rel.error_scales[k].dof for k in est]
                 edof[i], elim[i] = rel.ellipse_dof, rel.ellipse_limit(0.95)
-            Bw = mis.evaluate(f.p, jacobian=True).B
-            try:
-                cov = np.linalg.inv(Bw.T @ Bw)  # C_p = (A'^t A' + C_p0^-1)^-1, eqn 55
-            except np.linalg.LinAlgError:
-                cov = np.full((n, n), np.inf)
-            P[i], C[i], S[i], J[i] = f.p, cov, np.sqrt(np.clip(np.diag(cov), 0, None)), f.J
+            else:  # C_p = (A'^t A' + C_p0^-1)^-1, eqn 55, as `assess` makes it
+                la = posterior(mis.evaluate(f.p, jacobian=True), mis.parameters)
+            P[i], C[i], S[i], J[i] = f.p, la.covariance, la.std, f.J
             ok[i], bound[i] = f.status == "converged", f.at_bound
     if not est:
         return Replicates(P, S, C, J, ok, bound, list(base.parameters.names))

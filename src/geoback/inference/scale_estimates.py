@@ -4,7 +4,7 @@ scales; this module judges them; see its docstring for the formulas)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -12,9 +12,11 @@ from geoback.inference import chi2
 from geoback.inference.scales import LEVEL, MIN_DOF_REPORTED, ScaleGroup, ScaleState, special_scales
 
 # ---------------------------------------------------------------------------- what it means
-@dataclass
+@dataclass(frozen=True)
 class ScaleEstimate:
-    """One group's error scale: k = true sigma / stated sigma, with its interval and tests."""
+    """One group's error scale: k = true sigma / stated sigma, with its interval and tests (a
+    frozen value, built complete by ``group_estimates``; the fields' formulas are given there and
+    in ``factor_interval``, ``stated_p``, ``prior_predictive_p`` and ``others_p``)."""
 
     name: str
     instruments: tuple[str, ...]
@@ -171,8 +173,7 @@ def group_estimates(state: ScaleState, h: np.ndarray, level: float = LEVEL) -> l
             test = "others"
         e = ScaleEstimate(g.name, g.instruments, g.treatment(), g.estimated, g.m, c, factor, lo, hi, readings,
                           stated_p(J, c), p_allowed, test, ratio, J, level=level)
-        e.text = describe(e)
-        out.append(e)
+        out.append(replace(e, text=describe(e)))
     return out
 
 

@@ -9,6 +9,7 @@ import numpy as np
 from geoback.case.loading import LoadedCase
 from geoback.case.meshsize import refined_case
 from geoback.inference.identification import prepare
+from geoback.inference.misfit import block_noise
 from geoback.inference.parameters import resolve_values
 
 
@@ -21,8 +22,9 @@ def synthetic_readings(loaded: LoadedCase, refine: float = 2.0, values: Mapping 
     inclinometer's bias shift ('bias[I1]': 2e-4 rad) adds bias * L_n to its readings; its depth
     offset ('zoff[I1]': '300 mm') reads its stations and reference end that much deeper (the
     observation operator at the shifted points). Noise is L z with C_x = L L^t per instrument
-    (eqn 10), seeded, independent from stage to stage. Returns {instrument: readings} at the last
-    construction stage, or with `by_stage` {instrument: {stage: readings}} at every stage."""
+    (eqn 10; ``misfit.block_noise``, as ``Data.noise`` draws it), seeded, independent from stage
+    to stage. Returns {instrument: readings} at the last construction stage, or with `by_stage`
+    {instrument: {stage: readings}} at every stage."""
     fine = loaded.with_case(refined_case(loaded.case, refine))
     analysis = prepare(fine, parameters=[], with_readings=False)
     sim = analysis.simulation
@@ -34,7 +36,7 @@ def synthetic_readings(loaded: LoadedCase, refine: float = 2.0, values: Mapping 
     for block in sim.survey.blocks:
         xi = x[offset:offset + block.m].copy()
         if rng is not None:
-            xi += noise_scale * (np.linalg.cholesky(block.covariance) @ rng.standard_normal(block.m))
+            xi += noise_scale * block_noise(block, rng)
         out.setdefault(block.name, {})[block.stage] = xi
         offset += block.m
     if by_stage:

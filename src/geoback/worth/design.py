@@ -1,11 +1,14 @@
 """Data worth: which candidate instrument would narrow the forecasts (or the parameters) most.
 
 At the estimate the parameters' information is I = A'^t A' + C_p0^-1 (eqn 55; C_p = I^-1). A
-candidate instrument c read at a stage adds its readings' information A_c^t C_x,c^-1 A_c, with A_c
-its exact sensitivities (eqns 34-42, read through another survey on the same factorisations) and
-C_x,c its measurement covariance (eqns 10-20, integration constants included), so that after it
+candidate instrument c read at a stage adds its whitened rows A_c' = L_c^-1 A_c (information
+A_c^t C_x,c^-1 A_c), with A_c its exact sensitivities (eqns 34-42, read through another survey on
+the same factorisations) and C_x,c = L_c L_c^t its measurement covariance (eqns 10-20, integration
+constants included; whitened by the seam, ``misfit.whiten_block``), so that after it
 
-    C_p,c = (I + A_c^t C_x,c^-1 A_c)^-1,      C_q,c = F C_p,c F^t
+    C_p,c = (I + A_c'^t A_c')^-1,      C_q,c = F C_p,c F^t
+
+(``LinearAnalysis.conditional`` of the fit's ``Reliability.linear``, and its prediction variance)
 
 for the target forecasts q (F = dq/dp). Candidates are ranked by the root-mean-square std of the
 target forecasts after them (objective 'forecasts'), or by ln det C_p,c (objective 'parameters':
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from geoback.case.checks import expand_candidates
+from geoback.inference.misfit import whiten_block
 from geoback.observation.instruments import build_block
 from geoback.physics.simulation import is_constant
 
@@ -66,13 +70,6 @@ class DesignResult:
     @property
     def best(self) -> str:
         return self.names[int(self.ranking[0])]
-
-
-def _inverse(M: np.ndarray) -> np.ndarray:
-    """Inverse of an SPD information matrix spanning many decades (equilibrated)."""
-    d = np.sqrt(np.abs(np.diag(M)))
-    d = np.where(d > 0, d, 1.0)
-    return np.linalg.pinv(M / np.outer(d, d), hermitian=True) / np.outer(d, d)
 
 
 def candidate_blocks(loaded, default_stage: str) -> list[tuple[int, object, object]]:
@@ -120,8 +117,7 @@ def design(analysis, result, progress=None) -> DesignResult:
     physical = [n for n in names if not is_constant(n)]
     cols = [j for j, n in enumerate(names) if not is_constant(n)]
     values = {k: v for k, v in analysis.values_at(p).items() if not is_constant(k)}
-    info = result.reliability.information + np.diag(params.prior_precision())
-    Cp = _inverse(info)
+    now = result.reliability.linear  # C_p at the estimate (eqn 55)
     objective = spec.objective or ("forecasts" if loaded.case.forecasts else "parameters")
     targets, F, labels, unit = [], np.zeros((0, len(names))), [], ""
     if objective == "forecasts":
@@ -132,26 +128,25 @@ def design(analysis, result, progress=None) -> DesignResult:
         labels = [f"{fc.forecast[i]}:{fc.quantity[i]}@{fc.position[i]:.4g}" for i in rows]
         unit = fc.unit[rows[0]]
 
-    def measure(C):
+    def measure(posterior):
         if objective == "forecasts":
-            v = np.einsum("ij,jk,ik->i", F, C, F)
+            v = posterior.prediction_variance(F)
             return float(np.sqrt(np.mean(v))), np.sqrt(np.clip(v, 0, None))
-        sign, logdet = np.linalg.slogdet(C)
+        sign, logdet = np.linalg.slogdet(posterior.covariance)
         return float(logdet), np.zeros(0)
 
-    before, target_before = measure(Cp)
+    before, target_before = measure(now)
     cands = case_candidates(analysis)
     after, t_after, s_after = [], [], []
     for k, (fam, c, block) in enumerate(cands):
         with sim.surveying([block]) as view:
             A = np.zeros((block.m, len(names)))
             A[:, cols] = view.predict(values, physical, sensitivities=True).A
-        W = np.linalg.solve(block.covariance, A)
-        Cc = _inverse(info + A.T @ W)
-        a, t = measure(Cc)
+        after_c = now.conditional(whiten_block(block, A))  # A_c' = L_c^-1 A_c joins A'
+        a, t = measure(after_c)
         after.append(a)
         t_after.append(t)
-        s_after.append(np.sqrt(np.clip(np.diag(Cc), 0, None)))
+        s_after.append(after_c.std)
         if progress is not None and (k + 1) % 10 == 0:
             progress(f"design: {k + 1} of {len(cands)} candidates")
     varied = []
@@ -162,6 +157,6 @@ def design(analysis, result, progress=None) -> DesignResult:
                         [b.stage for _, _, b in cands], [f for f, _, _ in cands],
                         [spec.candidates[f].name for f, _, _ in cands], varied,
                         [b.m for _, _, b in cands], before, np.array(after),
-                        np.sqrt(np.clip(np.diag(Cp), 0, None)), np.array(s_after), labels, target_before,
+                        now.std, np.array(s_after), labels, target_before,
                         np.array(t_after), names, unit, time.perf_counter() - t0,
                         sim.counters.since(before_counts))

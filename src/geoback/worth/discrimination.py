@@ -16,7 +16,8 @@ so a candidate's separation is the smaller of lambda_ab and lambda_ba, and its p
 probability that a chi^2(1) test at `level` then rejects the wrong one,
 P(chi'^2(1, lambda) > chi^2_1(1 - level)). Like `design.py` it is linear about the fits and needs
 no readings of the candidates, only where they are and how accurate they are (C_x,c with its
-integration constants); it ignores the noise of the existing readings, which both fits share.
+integration constants; the candidates' rows whitened by the seam, ``misfit.whiten_block``); it
+ignores the noise of the existing readings, which both fits share.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from geoback.inference.misfit import whiten_block
 from geoback.physics.simulation import is_constant
 
 
@@ -65,7 +67,7 @@ class Discrimination:
                                                         self.power)]}
 
 
-@dataclass
+@dataclass(frozen=True)
 class _Fitted:
     """One hypothesis at its estimate: computed readings and whitened sensitivities, existing
     readings and each candidate's."""
@@ -90,9 +92,8 @@ def _fitted(misfit, p, cands) -> _Fitted:
             pred = view.predict(values, physical, sensitivities=True)
         A = np.zeros((block.m, len(names)))
         A[:, cols] = pred.A
-        L = np.linalg.cholesky(block.covariance)
         xc.append(pred.x)
-        Bc.append(np.linalg.solve(L, A))
+        Bc.append(whiten_block(block, A))
     return _Fitted(ev.x, B0, xc, Bc)
 
 
@@ -105,14 +106,14 @@ def _unexplained(B: np.ndarray, r: np.ndarray) -> float:
     return float(e @ e)
 
 
-def _growth(truth: _Fitted, other: _Fitted, misfit, Ls) -> np.ndarray:
+def _growth(truth: _Fitted, other: _Fitted, misfit, blocks) -> np.ndarray:
     """chi-square growth of `other` refitted when each candidate's readings join, `truth` true."""
     d0 = misfit.whiten(truth.x0 - other.x0)
     r0 = np.concatenate([d0, np.zeros(other.B0.shape[0] - len(d0))])
     base = _unexplained(other.B0, r0)
     out = []
-    for k, L in enumerate(Ls):
-        dc = np.linalg.solve(L, truth.xc[k] - other.xc[k])
+    for k, block in enumerate(blocks):
+        dc = whiten_block(block, truth.xc[k] - other.xc[k])
         # the candidate's rows go beside the existing readings' (before the prior rows: order is immaterial)
         r = np.concatenate([r0, dc])
         B = np.vstack([other.B0, other.Bc[k]])
@@ -125,8 +126,7 @@ def discriminate(a, b, blocks, names: list[str], level: float = 0.05) -> Discrim
     between hypotheses a and b, each given as (words, misfit, estimate p)."""
     (wa, ma, pa), (wb, mb, pb) = a, b
     fa, fb = _fitted(ma, pa, blocks), _fitted(mb, pb, blocks)
-    Ls = [np.linalg.cholesky(block.covariance) for block in blocks]
-    return Discrimination(wa, wb, list(names), _growth(fa, fb, mb, Ls), _growth(fb, fa, ma, Ls), level)
+    return Discrimination(wa, wb, list(names), _growth(fa, fb, mb, blocks), _growth(fb, fa, ma, blocks), level)
 
 
 def leading_pair(diagnosis, analysis):

@@ -6,6 +6,9 @@ For a forecast q(p) with sensitivity F = dq/dp at the estimate, the parameters' 
 
     C_q = F C_p F^t,      95 % band  q +- z sqrt(diag C_q)
 
+(``LinearAnalysis.prediction_covariance`` and ``prediction_std`` of the fit's ``Reliability.linear``;
+the std is infinite for a forecast that depends on a combination the readings do not determine)
+
 (z the normal quantile, or Student t's on the ellipse's degrees of freedom when error scales are
 estimated). F comes from the simulation's exact sensitivities (eqns 34-42) for displacements,
 chords and instrument readings, read through another survey on the same factorisations
@@ -274,10 +277,10 @@ def _forecast(model: ForecastModel, analysis, result, n: int, seconds: float, se
     p = result.fit.p
     values = analysis.values_at(p)
     q, F = model(values, params.names, sensitivities=True)
-    Cp = result.reliability.covariance
-    Cq = F @ Cp @ F.T
-    std = np.sqrt(np.clip(np.diag(Cq), 0, None))
     rel = result.reliability
+    Cp = rel.covariance
+    Cq = rel.linear.prediction_covariance(F)  # F C_p F^t (eqn 55 propagated)
+    std = rel.linear.prediction_std(F)  # inf for a forecast that depends on an undetermined combination
     z = Z95
     if np.isfinite(rel.ellipse_dof) and rel.scales_estimated:
         from scipy import special
