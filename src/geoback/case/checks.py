@@ -280,6 +280,9 @@ def expand_candidates(design) -> list[tuple[int, object]]:
     return out
 
 
+READINGS_OPTIONS = ("stage", "columns", "ignore_columns", "point_ids", "sign")  # how readings are read
+
+
 def design_problems(case: Case) -> list[tuple[tuple, str]]:
     """Candidates without readings, at known stages, in the ground; `vary` one field of theirs;
     targets that are forecasts of the case."""
@@ -304,11 +307,16 @@ def design_problems(case: Case) -> list[tuple[tuple, str]]:
         if c.readings is not None or c.readings_file is not None:
             out.append((at + ("readings" if c.readings is not None else "readings_file",),
                         "expected no readings for a candidate instrument (not installed yet), found some"))
+        for name in READINGS_OPTIONS:
+            if getattr(c, name, None) is not None:
+                out.append((at + (name,), f"expected no readings options for a candidate instrument (not "
+                                          f"installed yet), found {name}"))
         if c.read_at is not None and c.read_at not in stages:
             out.append((at + ("read_at",), f"expected one of the construction stages ({', '.join(stages)}), "
                                            f"found '{c.read_at}'"))
         if c.vary is not None:
-            fields = set(type(c).model_fields) - {"name", "kind", "vary", "read_at", "readings", "readings_file"}
+            fields = set(type(c).model_fields) - {"name", "kind", "vary", "read_at", "readings", "readings_file",
+                                                  *READINGS_OPTIONS}
             if len(c.vary) != 1:
                 out.append((at + ("vary",), f"expected one field to vary, found {len(c.vary)}"))
                 continue

@@ -165,20 +165,47 @@ Readings = Annotated[Union[Annotated[list[Num], Tag("in-order")],
                            Annotated[dict[StageName, list[Num]], Tag("by-stage")]], Discriminator(_readings_shape)]
 
 
+# what a readings file's column can mean (`columns:` maps a role to a header the file uses)
+COLUMN_ROLES = ("instrument", "station", "point", "depth", "distance", "x", "y", "component", "reading",
+                "settlement", "stage")
+
+
+def _header_text(value: Any) -> Any:
+    """A column header or point ID as written; a number YAML read (101) is taken as its text."""
+    if isinstance(value, bool) or isinstance(value, float):
+        raise ValueError(f"expected a text, found {shown(value)}")
+    return str(value) if isinstance(value, int) else value
+
+
+HeaderText = Annotated[str, BeforeValidator(_header_text), Field(min_length=1)]
+
+
 class _Instrument(Strict):
     name: str = Field(pattern=NAME, description="unique instrument name")
     readings: Optional[Readings] = Field(
-        None, description="measured values in station order from the reference end (taken at the last construction "
-                          "stage), or a mapping stage: [values] for readings taken at several stages")
+        None, description="measured values in station order from the reference end, or a mapping stage: [values] "
+                          "for readings taken at several stages (a list in a case with several construction stages "
+                          "needs `stage`)")
     readings_file: Optional[str] = Field(
-        None, description="CSV or text file with the readings (relative to the case file): a header row with a value "
-                          "column (reading, value, measured or displacement), a position column (station, depth or "
-                          "distance from the reference end) unless the file lists one instrument in station order, "
-                          "and optionally instrument, component and stage columns; a unit in the header such as "
-                          "'reading [mm]'")
+        None, description="CSV or text file with the readings (relative to the case file): a header row with a "
+                          "reading column (reading, value, measured, displacement; settlement: positive down), a "
+                          "position column (station, point, depth, distance from the reference end, x, y) unless "
+                          "the file lists one instrument in station order, and optionally instrument, component and "
+                          "stage columns; a unit in the header such as 'reading [mm]'. Every column is used, mapped "
+                          "(`columns`) or listed in `ignore_columns`; a reading written '', -, n/a or NaN is missing "
+                          "and dropped with its row and column of C_x")
     readings_unit: Optional[Literal["m", "mm", "cm", "rad", "mrad", "1/m"]] = Field(
         None, description="unit of the readings (default SI: m for displacements and length changes, rad for slopes, "
                           "1/m for curvatures)")
+    stage: Optional[StageName] = Field(
+        None, description="construction stage the readings were taken at, for a readings file without a stage column "
+                          "or a list of inline readings (needed when the case has several construction stages)")
+    columns: Optional[dict[Literal[COLUMN_ROLES], HeaderText]] = Field(
+        None, description="the readings file's headers for what geoback reads, where the file names them otherwise: "
+                          "{depth: 'Tiefe [m]', reading: 'Verschiebung [mm]'} (roles: " + ", ".join(COLUMN_ROLES) + ")")
+    ignore_columns: Optional[list[HeaderText]] = Field(
+        None, description="headers of readings-file columns geoback is to leave unread (a date, a remark), by name "
+                          "with or without the unit")
 
 
 class PointsInstrument(_Instrument):
@@ -188,6 +215,29 @@ class PointsInstrument(_Instrument):
     points: list[Point] = Field(min_length=1, description="[x, y] of each point [m]")
     components: list[Literal["ux", "uy"]] = Field(["ux", "uy"], min_length=1)
     sigma: Positive = Field(description="standard deviation of each reading [m]")
+    point_ids: Optional[Union[list[HeaderText], Literal["sorted"]]] = Field(
+        None, description="the points' IDs in a readings file's point column, in the order of `points` ([SP-01, "
+                          "SP-02, ...]); or 'sorted': the file's IDs in natural order (SP-2 before SP-10) are the "
+                          "points in the order of `points`")
+    sign: Optional[Literal["uy", "settlement"]] = Field(
+        None, description="vertical readings as 'uy' (up positive, the default) or as 'settlement' (down positive, "
+                          "as surveyors report them: u_y = -reading); a file's settlement column is taken as "
+                          "settlement")
+
+    @model_validator(mode="after")
+    def _ids(self):
+        if isinstance(self.point_ids, list):
+            if len(self.point_ids) != len(self.points):
+                raise ValueError(f"expected one point ID per point ({len(self.points)}), found "
+                                 f"{len(self.point_ids)} in point_ids")
+            twice = sorted({i for i in self.point_ids if self.point_ids.count(i) > 1})
+            if twice:
+                raise ValueError(f"expected point IDs different from each other, found {', '.join(twice)} more "
+                                 f"than once in point_ids")
+        if self.sign == "settlement" and "uy" not in self.components:
+            raise ValueError("expected sign: settlement for an instrument reading uy (settlements are vertical), "
+                             "found components " + ", ".join(self.components))
+        return self
 
 
 class _Linewise(_Instrument):

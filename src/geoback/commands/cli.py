@@ -134,15 +134,16 @@ def validate(case: Path = typer.Argument(..., help="case file (YAML)"), allow_la
 
     try:
         loaded = _load(case, allow_large)  # schema errors first: no heavy imports before them
+        from geoback.commands.validation import check_case
+
+        verdict = check_case(loaded)
     except CaseError as exc:
         if len(exc.problems) > 1:
             for problem in exc.problems:
                 _err(str(problem))
             raise typer.Exit(exc.exit_code) from None
         raise
-    from geoback.commands.validation import check_case
-
-    typer.echo(check_case(loaded))
+    typer.echo(verdict)
 
 
 @app.command()
@@ -320,12 +321,13 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
     def named(analysis):
         names[:] = analysis.parameters.names
 
+    matched: list[str] = []
     res = run_case(loaded, folder, method=method, progress=progress, plots=plots, say=_say if talk else None,
-                   prepared=named, profile="all" if profile else "auto")
+                   prepared=named, profile="all" if profile else "auto", matched=matched.extend)
     if as_json:
         _print_json(folder / "summary.json")
     elif not quiet:
-        typer.echo(report_text(res))
+        typer.echo(report_text(res, readings=matched))
     s = summary(res)
     estimates = ", ".join(f"{n} = {v['estimate']:.6g} +/- {v['std']:.3g}" for n, v in s["parameters"].items())
     warned = f"; {len(res.caveats)} warning(s): {', '.join(sorted({c.code for c in res.caveats}))}" \
@@ -360,6 +362,10 @@ def design(case: Path = typer.Argument(..., help="case file (YAML) with a design
     from geoback.inference.identification import identify, prepare
 
     analysis = prepare(loaded)
+    if analysis.misfit is None:
+        from geoback.observation.readings import require_readings
+
+        require_readings(loaded)  # names the instruments without readings
     _say("identifying the parameters at which the candidates are compared")
     res = identify(analysis)
     if res.fit.status != "converged" or not res.fit.moved:

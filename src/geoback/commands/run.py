@@ -10,15 +10,26 @@ from geoback.case.strength import is_plastic
 
 
 def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=None, vtu: bool | None = None,
-             plots: bool = False, say=None, prepared=None, profile: str = "auto") -> Identification:
+             plots: bool = False, say=None, prepared=None, profile: str = "auto", matched=None) -> Identification:
     """identify() the case, explore what the field file and figures need, write all outputs to `out`.
 
-    progress(iteration) follows the fit; say(text) the steps after it; prepared(analysis) is
-    called once the case is meshed and read, before the fit."""
+    progress(iteration) follows the fit; say(text) the steps after it and how the readings were
+    matched; prepared(analysis) is called once the case is meshed and read, before the fit;
+    matched(lines) with how the readings were matched (also in report.md and summary.json).
+    Instruments without readings are refused, named."""
     from geoback.inference.explore import explore
+    from geoback.observation.readings import readings_report, require_readings
     from geoback.reports.report import write_run
 
     analysis = prepare(loaded)
+    readings = readings_report(loaded)
+    require_readings(loaded, readings)
+    lines = readings.lines()
+    if matched is not None:
+        matched(lines)
+    if say is not None:
+        for line in lines:
+            say(f"readings: {line}")
     if prepared is not None:
         prepared(analysis)
     res = identify(analysis, method=method, progress=progress, profile=profile, mesh_error=None)
@@ -42,5 +53,5 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
 
         what = tuple(sorted(set(what) | set(exploration_for())))
     exploration = explore(analysis.misfit, res, what, analysis.settings, progress=say) if what else None
-    write_run(res, Path(out), exploration, plots=plots)
+    write_run(res, Path(out), exploration, plots=plots, readings=lines)
     return res

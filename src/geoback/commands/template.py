@@ -71,7 +71,11 @@ instruments:                   # readings are displacements [m] in station order
     var_b: 0.0                 # variance of the integration constant B (toe displacement) [m2]
     reading_type: displacement # readings are integrated displacements [m] (or primary: slopes)
     readings: [-0.0134754, -0.020579, -0.0331059, -0.0504841, -0.048834, -0.0269067, -0.0143154]  # [m], toe to head
-    # readings_file: I1.csv    # alternative to readings: a CSV file, relative to this file
+    # readings_file: I1.csv    # alternative to readings: a CSV file, relative to this file, matched by
+    #                          # station, depth or distance (every column used, mapped or ignored):
+    # columns: {depth: "Teufe [m]"}   # the file's header of a column geoback does not know by name
+    # ignore_columns: [Datum]  # columns geoback is to leave unread
+    # stage: lined             # with several construction stages: the stage of a list or a file without a stage column
 
   - name: X1                   # extensometer above the crown
     kind: extensometer         # sliding micrometer / extensometer along a straight line
@@ -96,6 +100,8 @@ instruments:                   # readings are displacements [m] in station order
     components: [uy]           # measured components per point: ux (horizontal), uy (vertical, up +)
     sigma: 0.001               # standard deviation of each reading [m]
     readings: [-0.0304, -0.0294, -0.0270, -0.0245, -0.0226, -0.0202, -0.0186]   # [m], point by point
+    # sign: settlement         # readings positive down (surveyors' settlements): u_y = -reading
+    # point_ids: [SP-01, SP-02, SP-03, SP-04, SP-05, SP-06, SP-07]   # IDs of a file's point column
 
 parameters:                    # what to identify: E[layer], nu[layer], K0, K0[layer], ...
   - name: E[clay]              # Young's modulus of layer clay [kPa]

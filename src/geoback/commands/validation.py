@@ -22,13 +22,17 @@ def stand_in_case(case):
 
 
 def check_case(loaded: LoadedCase) -> str:
-    """Build what `run` builds (or its coarse stand-in); return the one-line verdict. Raises
-    GeobackError (located when it is the case's fault) at the first problem found."""
+    """Build what `run` builds (or its coarse stand-in); return the verdict: one line, then how every
+    instrument's readings were matched, the instruments without readings, and warnings. Raises
+    GeobackError (located when it is the case's fault); a CaseError carries every problem of the
+    readings found (``CaseError.problems``)."""
     from geoback.inference.identification import prepare
     from geoback.case.meshsize import mesh_inputs
     from geoback.case.meshsize import estimate
+    from geoback.observation.readings import readings_report
 
     case = loaded.case
+    report = readings_report(loaded)  # every readings problem at once, before meshing
     est = estimate(mesh_inputs(case))
     name = loaded.path if loaded.path is not None else case.name
     if est.dofs <= VALIDATE_MESH_DOFS:
@@ -39,5 +43,9 @@ def check_case(loaded: LoadedCase) -> str:
         mesh_text = (f"mesh {est.describe()} to run, not built by validate: instruments, readings and "
                      f"parameters checked on a coarser mesh of the same geometry")
     warned = "".join(f"\nwarning: [{c.code}] {c.message}" for c in analysis.notices)
-    return (f"{name}: valid ({len(case.instruments)} instruments, {analysis.simulation.survey.m} readings, "
-            f"{len(case.parameters)} parameters, {mesh_text}){warned}")
+    read = sum(n.count for n in report.notes)
+    matched = "".join(f"\n  {n.text()}" for n in report.notes)
+    if report.unread:
+        matched += f"\n{report.unread_line()}"
+    return (f"{name}: valid ({len(case.instruments)} instruments, {read} readings, "
+            f"{len(case.parameters)} parameters, {mesh_text}){matched}{warned}")

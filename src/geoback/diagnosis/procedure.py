@@ -88,8 +88,11 @@ def locate(misfit: Misfit, res: Fit, rel: Reliability, alpha: float = 0.05) -> l
         ri = r[offset:offset + m]
         meas = data.measured[offset:offset + m]
         share = float(rw @ rw) / J if J > 0 else 0.0
-        if block.integration is not None:
+        if block.integration is not None and block.kept is None:
             z = np.linalg.solve(block.integration, ri) / block.sigma  # standardised primary residuals
+        elif block.integration is not None:  # stations dropped: increments between the stations read
+            D = np.eye(m) - np.eye(m, k=-1)
+            z = (D @ ri) / np.sqrt(np.diag(D @ block.covariance @ D.T))
         else:
             z = ri / np.sqrt(np.diag(block.covariance))
         i0, i1, stat = _strongest_run(z)
@@ -292,7 +295,9 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     analysis = case if isinstance(case, Analysis) else prepare(case)
     if analysis.misfit is None:
         from geoback.errors import GeobackError
+        from geoback.observation.readings import require_readings
 
+        require_readings(analysis.loaded)  # names them
         raise GeobackError("the case has instruments without readings: give 'readings' or 'readings_file' "
                            "for every instrument to diagnose it")
     settings = analysis.settings

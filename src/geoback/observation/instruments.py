@@ -86,6 +86,7 @@ class InstrumentBlock:
     along: np.ndarray | None = None  # linewise: unit direction along the line, away from the reference end
     measured: np.ndarray | None = None  # linewise: the direction each reading measures (eqns 11, 15, 18)
     reference_end: str = ""  # linewise, in words: 'toe' or 'head' (inclinometer), 'reference end' (others)
+    kept: tuple | None = None  # rows of the whole instrument this block reads (None: all; ``without``)
 
     @property
     def m(self) -> int:
@@ -93,9 +94,26 @@ class InstrumentBlock:
 
     @property
     def stations(self) -> np.ndarray:
-        """Where the readings are: the stations of a linewise instrument (without the reference end
-        a relative instrument also samples), the points of the others."""
-        return self.points[:self.m] if self.lengths is not None else self.points
+        """Where the readings are: the stations of a linewise instrument that are read (without the
+        reference end a relative instrument also samples), the points of the others."""
+        if self.lengths is None:
+            return self.points
+        return self.points[[lab.station - 1 for lab in self.labels]]
+
+    def without(self, rows) -> "InstrumentBlock":
+        """The instrument without the readings `rows` (indices into this block's rows), e.g. readings
+        marked missing: its labels, weights, G and W rows kept in order, and C_x the marginal of the
+        remaining readings (C_x[keep, keep]); the sampling points, lengths and constants' variances
+        stay those of the instrument. ``kept`` names the rows of the whole instrument still read."""
+        drop = {int(r) for r in rows}
+        if not drop <= set(range(self.m)):
+            raise IndexError(f"rows {sorted(drop - set(range(self.m)))} are not rows of '{self.name}' ({self.m})")
+        keep = [i for i in range(self.m) if i not in drop]
+        whole = self.kept if self.kept is not None else tuple(range(self.m))
+        return replace(self, weights=self.weights[keep], labels=[self.labels[i] for i in keep],
+                       covariance=self.covariance[np.ix_(keep, keep)], constants=self.constants[keep],
+                       integration=None if self.integration is None else self.integration[keep],
+                       kept=tuple(whole[i] for i in keep))
 
     @property
     def reference(self) -> np.ndarray | None:

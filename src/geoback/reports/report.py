@@ -24,7 +24,9 @@ def several_stages(labels) -> bool:
     return len({lab.stage for lab in labels}) > 1
 
 
-def summary(res, exploration=None) -> dict:
+def summary(res, exploration=None, readings=()) -> dict:
+    """summary.json: the estimate, its assessment and the run's counts; `readings`: how the readings
+    were matched (observation.readings.CaseReadings.lines), one line per instrument."""
     f, rel, params = res.fit, res.reliability, res.parameters
     lo, hi = rel.interval95()
     lo, hi = res.intervals95()
@@ -52,7 +54,8 @@ def summary(res, exploration=None) -> dict:
         "minus_2_log_likelihood": rel.minus2logL, "aic": rel.aic, "bic": rel.bic,
         "condition_number": rel.condition, "undetermined": rel.undetermined,
         "error_scales": [e.as_dict() for e in rel.error_scales],
-        "readings": res.data.m, "dofs": res.dofs, "elements": res.elements,
+        "readings": res.data.m, **({"readings_matched": list(readings)} if readings else {}),
+        "dofs": res.dofs, "elements": res.elements,
         **res.counts, "solver": res.solver,
         "timings_s": {k: round(v, 4) for k, v in res.seconds.items()},
         "platform": platform.platform(),
@@ -81,9 +84,10 @@ def _cv(value: float, std: float) -> str:
     return f" ({100 * std / abs(value):.0f} %)" if std / abs(value) >= 0.01 else f" ({100 * std / abs(value):.2g} %)"
 
 
-def report_text(res, exploration=None) -> str:
+def report_text(res, exploration=None, readings=()) -> str:
     """A one-page report in the spirit of lmfit's fit_report, warnings first; the plastic zone at the
-    estimate when the exploration holds it."""
+    estimate when the exploration holds it; `readings`: how the readings were matched, one line per
+    instrument (observation.readings.CaseReadings.lines)."""
     f, rel, params = res.fit, res.reliability, res.parameters
     lines = [f"# geoback fit report: {res.name}", ""]
     if res.caveats:
@@ -92,6 +96,7 @@ def report_text(res, exploration=None) -> str:
               f"- method: {f.method}, {f.iterations} iterations, {res.counts['factorisations']} factorisation(s), "
               f"{res.counts['solves']} solves",
               f"- readings m = {res.data.m}, parameters n = {params.n}, dofs = {res.dofs}",
+              *[f"  - {line}" for line in readings],
               chi2_line(rel),
               f"- AIC = {rel.aic:.6g}, BIC = {rel.bic:.6g}, condition number = {rel.condition:.3g}", "",
               "| parameter | unit | initial | estimate | std | 95 % interval |", "|---|---|---|---|---|---|"]
@@ -204,14 +209,15 @@ def write_field(field, path: Path) -> None:
     write_mesh(field.mesh, path, point_data=point, cell_data=field.cell_data)
 
 
-def write_run(res, out: Path, exploration=None, plots: bool = False) -> None:
+def write_run(res, out: Path, exploration=None, plots: bool = False, readings=()) -> None:
     """Every file of a run, replacing the previous run's set in `out` as a whole (outputs.result_set);
-    the field (field.vtu) and figures if the exploration has them."""
+    the field (field.vtu) and figures if the exploration has them; `readings`: how the readings were
+    matched, in report.md and summary.json."""
     with result_set(out, "run") as staging:
-        _write_run(res, staging, exploration, plots)
+        _write_run(res, staging, exploration, plots, readings)
 
 
-def _write_run(res, out: Path, exploration, plots: bool) -> None:
+def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
     f, rel, params = res.fit, res.reliability, res.parameters
     names = params.names
     out = Path(out)
@@ -260,5 +266,5 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
         from geoback.reports.plots import plot_run
 
         plot_run(res, exploration, out)
-    write_atomic(out / "report.md", report_text(res, exploration))
-    write_json(out / "summary.json", summary(res, exploration))
+    write_atomic(out / "report.md", report_text(res, exploration, readings))
+    write_json(out / "summary.json", summary(res, exploration, readings))

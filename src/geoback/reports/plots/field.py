@@ -27,7 +27,10 @@ def field_figure(res, exploration) -> Figure:
     xy = mesh.nodes + factor * u
     T = Triangulation(xy[:, 0], xy[:, 1], mesh.triangles[:, :3])
     inst = []  # (block, displaced stations, displaced line or None)
-    for block in {b.name: b for b in res.data.blocks}.values():  # once per instrument (read at several stages)
+    first: dict = {}
+    for b in res.data.blocks:
+        first.setdefault(b.name, b)  # the survey the exploration's profile holds the stations of
+    for block in first.values():  # once per instrument (read at several stages)
         prof = exploration.profiles[block.name]
         stations = block.stations + factor * prof.station_displacement
         if block.kind == "convergence":  # a straight chord between its two (displaced) ends

@@ -60,7 +60,10 @@ def instruments_figure(res, exploration=None, before: np.ndarray | None = None, 
             vertical = abs(block.along[1]) >= abs(block.along[0])
             coord = -st[:, 1] if vertical else st[:, 0]
             pair = (lambda v, c: (v, c)) if vertical else (lambda v, c: (c, v))
+        keys = sorted({(lab.station, lab.component) for blk, _ in group for lab in blk.labels})
         for k, (blk, rows) in enumerate(group):
+            if linewise:  # the stations this survey read (one may have been marked missing)
+                coord = -blk.stations[:, 1] if vertical else blk.stations[:, 0]
             colour = STAGE_COLOURS[stages.index(blk.stage) % len(STAGE_COLOURS)] if staged else "#1f77b4"
             mark = colour if staged else "k"
             band = colour if staged else "0.55"
@@ -99,7 +102,7 @@ def instruments_figure(res, exploration=None, before: np.ndarray | None = None, 
                                 bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none", alpha=0.7))
             else:
                 shift = 0.16 * (k - (len(group) - 1) / 2)
-                kk = np.arange(1, len(rows) + 1) + shift
+                kk = np.array([keys.index((lab.station, lab.component)) + 1 for lab in blk.labels]) + shift
                 ax.errorbar(kk, xm, yerr=2 * sg, ls="none", marker="x", ms=7, mew=1.8, color=mark, capsize=4,
                             elinewidth=1.0)
                 ax.plot(kk, xc, ls="none", marker="o", ms=6, mfc="white", mec=colour, mew=1.6)
@@ -108,7 +111,7 @@ def instruments_figure(res, exploration=None, before: np.ndarray | None = None, 
                 for k_, y_, rv in zip(kk, xm, r_):
                     ax.annotate(f"r′={rv:+.2f}", (k_, y_), xytext=(6, 0), textcoords="offset points", fontsize=7.5,
                                 va="center", color="#b22222" if abs(rv) > 2 else (colour if staged else "0.25"))
-        m = len(group[0][1])
+        m = len(keys)
         if linewise:
             (ax.axvline if vertical else ax.axhline)(0, color="0.7", lw=0.7, zorder=0)
             if vertical:
@@ -124,12 +127,13 @@ def instruments_figure(res, exploration=None, before: np.ndarray | None = None, 
             k = np.arange(1, m + 1)
             ax.set_xticks(k)
             if block.kind == "points":
-                ax.set_xticklabels([f"{lab.component} at ({lab.x:g}, {lab.y:g})" for lab in block.labels],
+                where = {(lab.station, lab.component): (lab.x, lab.y) for blk, _ in group for lab in blk.labels}
+                ax.set_xticklabels([f"{c} at ({where[(st, c)][0]:g}, {where[(st, c)][1]:g})" for st, c in keys],
                                    rotation=35, ha="right", rotation_mode="anchor")
                 ax.set_xlabel("reading: component at point (x, y) [m]")
                 ax.set_ylabel("displacement [mm]\n(u_x + away from the axis, u_y + up)")
             else:
-                ax.set_xticklabels([f"chord {lab.station}" for lab in block.labels])
+                ax.set_xticklabels([f"chord {st}" for st, _ in keys])
                 ax.set_xlabel("chord")
                 ax.set_ylabel("change of chord length (+ lengthening) [mm]")
             ax.set_xlim(0.4, m + 0.6)
