@@ -92,11 +92,36 @@ def _stress(value: Any) -> Any:
 
 
 Stress = Annotated[float, BeforeValidator(_stress)]
+
+_LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "km": 1e3}
+
+
+def _length(value: Any) -> Any:
+    """Accept numbers (m) or strings with an explicit unit: '0.5 m', '50 cm', '500mm' (as stresses
+    accept '10 MPa')."""
+    if isinstance(value, str):
+        m = re.fullmatch(r"\s*([-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?)\s*([A-Za-z]+)?\s*", value)
+        if not m:
+            raise ValueError(f"expected a number, found {shown(value)} (a length in m, or with a unit "
+                             f"like '50 cm')")
+        if m.group(2) and m.group(2).lower() not in _LENGTH_UNITS:
+            raise ValueError(f"expected a unit m, cm, mm or km after the number, found '{m.group(2)}' "
+                             f"in {shown(value)}")
+        number = float(m.group(1)) * _LENGTH_UNITS[(m.group(2) or "m").lower()]
+        if not math.isfinite(number):
+            raise ValueError(f"expected a finite length, found {shown(value)}")
+        return number
+    return _number(value)
+
+
+Length = Annotated[float, BeforeValidator(_length)]
+PositiveLength = Annotated[float, BeforeValidator(_length), Field(gt=0)]
+NonNegativeLength = Annotated[float, BeforeValidator(_length), Field(ge=0)]
 Num = Annotated[float, BeforeValidator(_number)]
 Positive = Annotated[float, BeforeValidator(_number), Field(gt=0)]
 NonNegative = Annotated[float, BeforeValidator(_number), Field(ge=0)]
 Count = Annotated[int, BeforeValidator(_whole)]
-Point = tuple[Num, Num]
+Point = tuple[Length, Length]
 
 
 class Strict(BaseModel):
@@ -106,10 +131,10 @@ class Strict(BaseModel):
 class Geometry(Strict):
     """Half-model of a circular tunnel: x from 0 (symmetry axis) to `width`, y from -`depth` to 0."""
 
-    radius: Positive = Field(description="tunnel radius R [m]")
-    axis_depth: Positive = Field(description="depth of the tunnel axis below the surface [m]")
-    width: Positive = Field(description="width of the half-model (symmetry axis to far side) [m]")
-    depth: Positive = Field(description="depth of the model's bottom boundary below the surface [m]")
+    radius: PositiveLength = Field(description="tunnel radius R [m]")
+    axis_depth: PositiveLength = Field(description="depth of the tunnel axis below the surface [m]")
+    width: PositiveLength = Field(description="width of the half-model (symmetry axis to far side) [m]")
+    depth: PositiveLength = Field(description="depth of the model's bottom boundary below the surface [m]")
 
 
 GROUND_MODELS = ("linear-elastic", "mohr-coulomb")
@@ -119,7 +144,7 @@ Angle = Annotated[float, BeforeValidator(_number)]
 
 class Layer(Strict):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$", description="layer name (letters, digits, _ -)")
-    top: NonNegative = Field(description="depth of the layer's top [m]; the first layer starts at 0")
+    top: NonNegativeLength = Field(description="depth of the layer's top [m]; the first layer starts at 0")
     E: Stress = Field(gt=0, description="Young's modulus [kPa] (or '10 MPa')")
     nu: Num = Field(ge=0.0, lt=0.5, description="Poisson's ratio, 0 <= nu < 0.5")
     K0: Optional[Positive] = Field(None, description="coefficient of earth pressure at rest of this layer")
@@ -142,9 +167,9 @@ class Ground(Strict):
 
 
 class MeshSettings(Strict):
-    size_tunnel: Optional[Positive] = Field(None, description="element size at the tunnel wall [m] (default R/8)")
-    size_far: Optional[Positive] = Field(None, description="element size far from the tunnel [m] (default domain/12)")
-    size_instruments: Optional[Positive] = Field(None, description="element size along instruments [m] (default: no refinement)")
+    size_tunnel: Optional[PositiveLength] = Field(None, description="element size at the tunnel wall [m] (default R/8)")
+    size_far: Optional[PositiveLength] = Field(None, description="element size far from the tunnel [m] (default domain/12)")
+    size_instruments: Optional[PositiveLength] = Field(None, description="element size along instruments [m] (default: no refinement)")
     order: Annotated[Literal[1, 2], BeforeValidator(_whole)] = Field(2, description="element order: 2 = quadratic triangles")
     growth: Annotated[float, BeforeValidator(_number), Field(gt=0.01, le=2.0)] = Field(
         0.25, description="element size grows by this fraction of the distance from the tunnel (and instruments)")
@@ -214,7 +239,7 @@ class PointsInstrument(_Instrument):
     kind: Literal["points"]
     points: list[Point] = Field(min_length=1, description="[x, y] of each point [m]")
     components: list[Literal["ux", "uy"]] = Field(["ux", "uy"], min_length=1)
-    sigma: Positive = Field(description="standard deviation of each reading [m]")
+    sigma: PositiveLength = Field(description="standard deviation of each reading [m]")
     point_ids: Optional[Union[list[HeaderText], Literal["sorted"]]] = Field(
         None, description="the points' IDs in a readings file's point column, in the order of `points` ([SP-01, "
                           "SP-02, ...]); or 'sorted': the file's IDs in natural order (SP-2 before SP-10) are the "
@@ -241,9 +266,9 @@ class PointsInstrument(_Instrument):
 
 
 class _Linewise(_Instrument):
-    spacing: Optional[Positive] = Field(None, description="equal distance between stations [m]")
+    spacing: Optional[PositiveLength] = Field(None, description="equal distance between stations [m]")
     stations: Optional[Count] = Field(None, gt=0, description="number of stations (with spacing)")
-    lengths: Optional[list[Positive]] = Field(None, min_length=1,
+    lengths: Optional[list[PositiveLength]] = Field(None, min_length=1,
                                               description="distances l_1..l_n between stations from the reference end [m]")
     reading_type: Literal["displacement", "primary"] = Field(
         "displacement", description="readings given as integrated displacements or as primary readings")
@@ -262,9 +287,9 @@ class Inclinometer(_Linewise):
     """Vertical borehole at x; slopes integrated from the reference end (eqns 15-17)."""
 
     kind: Literal["inclinometer"]
-    x: NonNegative = Field(description="horizontal position of the borehole [m]")
-    toe_depth: Positive = Field(description="depth of the borehole's toe [m]")
-    head_depth: NonNegative = Field(0.0, description="depth of the borehole's head [m]")
+    x: NonNegativeLength = Field(description="horizontal position of the borehole [m]")
+    toe_depth: PositiveLength = Field(description="depth of the borehole's toe [m]")
+    head_depth: NonNegativeLength = Field(0.0, description="depth of the borehole's head [m]")
     reference: Literal["toe", "head"] = Field("toe", description="end the readings are integrated from")
     readings_relative: Annotated[bool, BeforeValidator(_flag)] = Field(
         True, description="true (field practice): the readings are movements relative to the reference end, as "
@@ -284,7 +309,7 @@ class SlidingMicrometer(_Linewise):
     readings_relative: Annotated[bool, BeforeValidator(_flag)] = Field(
         False, description="true: the readings are movements relative to the reference end (start), compared with "
                            "u - u(start); false (default): absolute displacements (the head surveyed)")
-    sigma: Positive = Field(description="standard deviation of one length-change reading [m]")
+    sigma: PositiveLength = Field(description="standard deviation of one length-change reading [m]")
     var_a: NonNegative = Field(0.0, description="variance of the integration constant A [m2]")
 
 
@@ -304,7 +329,7 @@ class Convergence(_Instrument):
 
     kind: Literal["convergence"]
     points: tuple[Point, Point]
-    sigma: Positive = Field(description="standard deviation of the reading [m]")
+    sigma: PositiveLength = Field(description="standard deviation of the reading [m]")
 
 
 Instrument = Annotated[Union[PointsInstrument, Inclinometer, SlidingMicrometer, Deflectometer,
@@ -416,7 +441,7 @@ class Lining(Strict):
 
     name: str = Field("lining", pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$",
                       description="name of the lining (its parameters are E[name] and nu[name])")
-    thickness: Positive = Field(description="thickness of the lining [m]; its outer face is the excavated wall")
+    thickness: PositiveLength = Field(description="thickness of the lining [m]; its outer face is the excavated wall")
     E: Stress = Field(gt=0, description="Young's modulus of the lining [kPa] (or '30 GPa')")
     nu: Num = Field(ge=0.0, lt=0.5, description="Poisson's ratio of the lining, 0 <= nu < 0.5")
     layers: Annotated[int, BeforeValidator(_whole), Field(ge=1, le=8)] = Field(
