@@ -493,14 +493,15 @@ def test_validate_names_instruments_without_readings_and_run_refuses_naming_them
         ins.pop("readings")
     path = write_case(tmp_path, data)
     proc = run_cli(["validate", path], tmp_path)
-    assert proc.returncode == 0, proc.stderr
-    assert "valid (3 instruments, 7 readings" in proc.stdout
-    assert "no readings: X1, S1 - run needs readings of every instrument" in proc.stdout
+    # issue 23: what run refuses before fitting, validate refuses too (the same located line)
+    assert proc.returncode == 2, proc.stdout
+    assert "found none for X1, S1" in proc.stderr and "Traceback" not in proc.stderr
     run = run_cli(["run", path, "--out", tmp_path / "out"], tmp_path)
     assert run.returncode == 2 and "Traceback" not in run.stderr
     (line,) = run.stderr.strip().splitlines()
     assert f"{path}:" in line and "instruments[1]: expected readings of every instrument to identify parameters, " \
                                   "found none for X1, S1" in line
+    assert proc.stderr.strip() == run.stderr.strip()
 
 
 def test_validate_lists_every_readings_problem(tmp_path, reference):

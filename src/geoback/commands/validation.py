@@ -29,10 +29,11 @@ def check_case(loaded: LoadedCase) -> str:
     from geoback.inference.identification import prepare
     from geoback.case.meshsize import mesh_inputs
     from geoback.case.meshsize import estimate
-    from geoback.observation.readings import readings_report
+    from geoback.observation.readings import readings_report, require_readings
 
     case = loaded.case
     report = readings_report(loaded)  # every readings problem at once, before meshing
+    require_readings(loaded, report)  # what `run` refuses before fitting, validate refuses too (issue 23)
     est = estimate(mesh_inputs(case))
     name = loaded.path if loaded.path is not None else case.name
     if est.dofs <= VALIDATE_MESH_DOFS:
@@ -45,7 +46,5 @@ def check_case(loaded: LoadedCase) -> str:
     warned = "".join(f"\nwarning: [{c.code}] {c.message}" for c in analysis.notices)
     read = sum(n.count for n in report.notes)
     matched = "".join(f"\n  {n.text()}" for n in report.notes)
-    if report.unread:
-        matched += f"\n{report.unread_line()}"
     return (f"{name}: valid ({len(case.instruments)} instruments, {read} readings, "
             f"{len(case.parameters)} parameters, {mesh_text}){matched}{warned}")
