@@ -14,6 +14,21 @@ ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "cases" / "tunnel-paper.yaml"
 
 
+def _shipped_with(tmp_path: Path, name: str, change) -> Path:
+    """A shipped case with one change (`change(data)`), written to tmp_path with its readings files
+    still found."""
+    import yaml
+
+    data = yaml.safe_load((ROOT / "cases" / name).read_text())
+    change(data)
+    for ins in data["instruments"]:
+        if ins.get("readings_file"):
+            ins["readings_file"] = str(ROOT / "cases" / ins["readings_file"])
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
 def _snapshot(folder: Path) -> dict:
     return {p.relative_to(folder).as_posix(): p.stat().st_mtime_ns for p in sorted(folder.rglob("*"))}
 
@@ -65,15 +80,8 @@ def test_diagnose_cli_refuses_alpha_before_any_work(tmp_path):
 def test_an_error_scale_prior_of_huge_dof_is_refused_located(tmp_path):
     """An inverse-chi2 prior worth 1e20 readings ended in a traceback in run_case; it is a known
     scale, refused at load with its location."""
-    import yaml
-
-    data = yaml.safe_load((ROOT / "cases" / "tunnel-paper-error-scales.yaml").read_text())
-    data["error_scales"] = [{"instruments": ["I1"], "prior": {"shape": "inverse-chi2", "dof": 1e20}}]
-    for ins in data["instruments"]:
-        if ins.get("readings_file"):
-            ins["readings_file"] = str(ROOT / "cases" / ins["readings_file"])
-    path = tmp_path / "huge-dof.yaml"
-    path.write_text(yaml.safe_dump(data))
+    path = _shipped_with(tmp_path, "tunnel-paper-error-scales.yaml", lambda d: d.update(error_scales=[
+        {"instruments": ["I1"], "prior": {"shape": "inverse-chi2", "dof": 1e20}}]))
     with pytest.raises(GeobackError) as info:
         geoback.load_case(path)
     assert "error_scales[0].prior.dof" in str(info.value) and "scale: known" in str(info.value)
@@ -89,17 +97,9 @@ def test_simulate_seed_must_be_a_whole_number_0_or_above(tmp_path):
 
 def test_a_forecast_chord_whose_ends_coincide_is_refused_by_validate(tmp_path):
     """`validate` said valid and `run` refused: a convergence forecast between one point and itself."""
-    import yaml
-
-    data = yaml.safe_load((ROOT / "cases" / "staged-forecast.yaml").read_text())
-    data["forecasts"].append({"name": "chord", "kind": "convergence", "points": [[4.0, -15.0], [4.0, -15.0]],
-                              "stage": "lined"})
-    for ins in data["instruments"]:
-        if ins.get("readings_file"):
-            ins["readings_file"] = str(ROOT / "cases" / ins["readings_file"])
-    path = tmp_path / "chord.yaml"
-    path.write_text(yaml.safe_dump(data))
+    chord = {"name": "chord", "kind": "convergence", "points": [[4.0, -15.0], [4.0, -15.0]], "stage": "lined"}
+    path = _shipped_with(tmp_path, "staged-forecast.yaml", lambda d: d["forecasts"].append(chord))
     with pytest.raises(GeobackError) as info:
         geoback.load_case(path)
-    index = len(data["forecasts"]) - 1
+    index = len(geoback.load_case(ROOT / "cases" / "staged-forecast.yaml").case.forecasts)
     assert f"forecasts[{index}].points" in str(info.value) and "two distinct points" in str(info.value)

@@ -74,21 +74,30 @@ def _whole(value: Any) -> Any:
     return value
 
 
-def _stress(value: Any) -> Any:
-    """Accept numbers (kPa) or strings with an explicit unit: '10 MPa', '2e4 kPa'."""
+_NUMBER_AND_UNIT = re.compile(r"\s*([-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?)\s*([A-Za-z/]+)?\s*")
+
+
+def _with_unit(value: Any, units: dict, default: str, what: str, unit_words: str, shape_error: str) -> Any:
+    """A number in the default unit, or a string '<number> <unit>' converted by `units` (keys lower
+    case, listed for people as `unit_words`); `shape_error` is the message for a string that is no
+    number with a unit."""
     if isinstance(value, str):
-        m = re.fullmatch(r"\s*([-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?)\s*([A-Za-z/]+)?\s*", value)
+        m = _NUMBER_AND_UNIT.fullmatch(value)
         if not m:
-            raise ValueError(f"expected a stress: a number in kPa or a number with a unit like '10 MPa', "
-                             f"found {shown(value)}")
-        if m.group(2) and m.group(2).lower() not in _UNITS:
-            raise ValueError(f"expected a unit Pa, kPa, MPa or GPa after the number, found '{m.group(2)}' "
-                             f"in {shown(value)}")
-        number = float(m.group(1)) * _UNITS[(m.group(2) or "kpa").lower()]
+            raise ValueError(shape_error)
+        if m.group(2) and m.group(2).lower() not in units:
+            raise ValueError(f"expected a unit {unit_words} after the number, found '{m.group(2)}' in {shown(value)}")
+        number = float(m.group(1)) * units[(m.group(2) or default).lower()]
         if not math.isfinite(number):
-            raise ValueError(f"expected a finite stress, found {shown(value)}")
+            raise ValueError(f"expected a finite {what}, found {shown(value)}")
         return number
     return _number(value)
+
+
+def _stress(value: Any) -> Any:
+    """Accept numbers (kPa) or strings with an explicit unit: '10 MPa', '2e4 kPa'."""
+    return _with_unit(value, _UNITS, "kpa", "stress", "Pa, kPa, MPa or GPa",
+                      f"expected a stress: a number in kPa or a number with a unit like '10 MPa', found {shown(value)}")
 
 
 Stress = Annotated[float, BeforeValidator(_stress)]
@@ -99,19 +108,8 @@ _LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "km": 1e3}
 def _length(value: Any) -> Any:
     """Accept numbers (m) or strings with an explicit unit: '0.5 m', '50 cm', '500mm' (as stresses
     accept '10 MPa')."""
-    if isinstance(value, str):
-        m = re.fullmatch(r"\s*([-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?)\s*([A-Za-z]+)?\s*", value)
-        if not m:
-            raise ValueError(f"expected a number, found {shown(value)} (a length in m, or with a unit "
-                             f"like '50 cm')")
-        if m.group(2) and m.group(2).lower() not in _LENGTH_UNITS:
-            raise ValueError(f"expected a unit m, cm, mm or km after the number, found '{m.group(2)}' "
-                             f"in {shown(value)}")
-        number = float(m.group(1)) * _LENGTH_UNITS[(m.group(2) or "m").lower()]
-        if not math.isfinite(number):
-            raise ValueError(f"expected a finite length, found {shown(value)}")
-        return number
-    return _number(value)
+    return _with_unit(value, _LENGTH_UNITS, "m", "length", "m, cm, mm or km",
+                      f"expected a number, found {shown(value)} (a length in m, or with a unit like '50 cm')")
 
 
 Length = Annotated[float, BeforeValidator(_length)]
