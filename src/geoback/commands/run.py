@@ -10,11 +10,13 @@ from geoback.case.strength import is_plastic
 
 
 def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=None, vtu: bool | None = None,
-             plots: bool = False, say=None, prepared=None, profile: str = "auto") -> Identification:
+             plots: bool = False, say=None, prepared=None, profile: str = "auto",
+             objective_map: str = "auto") -> Identification:
     """identify() the case, explore what the field file and figures need, write all outputs to `out`.
 
     progress(iteration) follows the fit; say(text) the steps after it; prepared(analysis) is
-    called once the case is meshed and read, before the fit."""
+    called once the case is meshed and read, before the fit; objective_map: how the objective map
+    of the figures is drawn ('auto', 'model', 'linearised': ``inference.explore``)."""
     from geoback.inference.explore import explore
     from geoback.reports.report import write_run
 
@@ -41,6 +43,7 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
         from geoback.reports.plots import exploration_for
 
         what = tuple(sorted(set(what) | set(exploration_for())))
-    exploration = explore(analysis.misfit, res, what, analysis.settings, progress=say) if what else None
+    exploration = explore(analysis.misfit, res, what, analysis.settings, progress=say,
+                          objective_map=objective_map) if what else None
     write_run(res, Path(out), exploration, plots=plots)
     return res

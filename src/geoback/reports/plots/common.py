@@ -12,6 +12,8 @@ import numpy as np  # noqa: E402
 from matplotlib import patheffects  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from geoback.reports.units import shown  # noqa: E402
+
 DPI = 150
 HALO = [patheffects.withStroke(linewidth=2.5, foreground="white")]
 BEFORE = "#d62728"  # colour of a second model's readings (a diagnosis' baseline)
@@ -26,12 +28,18 @@ RC = {"font.size": 9.5, "axes.titlesize": 10.5, "axes.labelsize": 9.5, "legend.f
 
 
 def display(name: str, unit: str, value: float) -> tuple[float, str]:
-    """Factor and unit to show a parameter with (kPa moduli in MPa)."""
-    if unit == "kPa" and abs(value) >= 1e3:
-        return 1e-3, "MPa"
-    if unit == "kPa/m" and abs(value) >= 1e3:
-        return 1e-3, "MPa/m"
-    return 1.0, unit or "-"
+    """Factor and unit to show a parameter with (kPa moduli in MPa, from 1 GPa in GPa: ``units.shown``)."""
+    return shown(unit, value)
+
+
+def plain(v: float, digits: int = 3) -> str:
+    """A number with `digits` significant digits, without e-notation between 1e-3 and 1e6 (1081, not
+    1.08e+03)."""
+    if not np.isfinite(v):
+        return f"{v}"
+    if 1e3 <= abs(v) < 1e6:
+        return f"{v:.0f}"
+    return f"{v:.{digits}g}"
 
 
 def axis_label(params, i: int, value: float) -> str:
