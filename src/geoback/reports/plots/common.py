@@ -85,6 +85,18 @@ def new_figure(w: float, h: float) -> Figure:
     return Figure(figsize=(w, h), dpi=DPI, layout="constrained")
 
 
+def section_frames(g) -> tuple:
+    """Limits of the two panels of a cross-section (the whole half model; about 2.5 radii around the
+    tunnel, cut at the ground surface) and their width ratios: (full_x, full_y, zoom_x, zoom_y, ratios)."""
+    cy, R = -g.axis_depth, g.radius
+    zx = (-0.04 * 2.6 * R, min(g.width, 2.6 * R))
+    ztop = 0.0 if cy + 2.4 * R > -1.2 * R else cy + 2.4 * R  # keep a shallow cover whole
+    zy = (max(-g.depth, cy - 2.4 * R), ztop + 0.04 * 2.6 * R)
+    full_x, full_y = (-0.02 * g.width, 1.02 * g.width), (-1.02 * g.depth, 0.04 * g.depth)
+    ratios = [(full_x[1] - full_x[0]) / (full_y[1] - full_y[0]), (zx[1] - zx[0]) / (zy[1] - zy[0])]
+    return full_x, full_y, zx, zy, ratios
+
+
 def direction_words(v: np.ndarray) -> str:
     """'+ downwards' etc. for a measured direction vector (x away from the axis, y up)."""
     v = np.asarray(v, float)

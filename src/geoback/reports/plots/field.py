@@ -11,7 +11,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 from matplotlib.tri import Triangulation
 
-from geoback.reports.plots.common import HALO, estimate_text, new_figure, nice_factor
+from geoback.reports.plots.common import HALO, section_frames, estimate_text, new_figure, nice_factor
 
 LINING = "#2a6f97"
 FIELD_TARGET = 0.35  # the largest displacement is drawn as about this fraction of the tunnel radius
@@ -48,12 +48,7 @@ def field_figure(res, exploration) -> Figure:
             line_moved = None
         inst.append((block, stations, line_moved))
     cx, cy, R = 0.0, -g.axis_depth, g.radius
-    # zoom on the tunnel: about 2.5 radii around it, cut at the ground surface
-    zx = (-0.04 * 2.6 * R, min(g.width, 2.6 * R))
-    ztop = 0.0 if cy + 2.4 * R > -1.2 * R else cy + 2.4 * R  # keep a shallow cover whole
-    zy = (max(-g.depth, cy - 2.4 * R), ztop + 0.04 * 2.6 * R)
-    full_x, full_y = (-0.02 * g.width, 1.02 * g.width), (-1.02 * g.depth, 0.04 * g.depth)
-    ratios = [(full_x[1] - full_x[0]) / (full_y[1] - full_y[0]), (zx[1] - zx[0]) / (zy[1] - zy[0])]
+    full_x, full_y, zx, zy, ratios = section_frames(g)
     fig = new_figure(4.9 * (ratios[0] + ratios[1]) + 1.6, 5.6)
     axF, axZ = fig.subplots(1, 2, width_ratios=ratios)
     top = umax * 1e3 if umax > 0 else 1.0

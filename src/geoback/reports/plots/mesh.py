@@ -8,7 +8,7 @@ from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from geoback.reports.plots.common import HALO, new_figure
+from geoback.reports.plots.common import HALO, section_frames, new_figure
 
 LAYER_COLOURS = ("#e8d8b0", "#c9d9a8", "#b9cfe0", "#e3c0c0", "#d6c6e6", "#c8e0d8", "#efd9c2", "#d0d0d0")
 LINING = "#2a6f97"
@@ -26,11 +26,7 @@ def mesh_figure(mesh, case, blocks=(), name: str | None = None) -> Figure:
     colour = np.array([LINING if mesh.region_names[r] == lining else LAYER_COLOURS[r % len(LAYER_COLOURS)]
                        for r in mesh.region])
     cx, cy, R = 0.0, -g.axis_depth, g.radius
-    zx = (-0.04 * 2.6 * R, min(g.width, 2.6 * R))
-    ztop = 0.0 if cy + 2.4 * R > -1.2 * R else cy + 2.4 * R
-    zy = (max(-g.depth, cy - 2.4 * R), ztop + 0.04 * 2.6 * R)
-    full_x, full_y = (-0.02 * g.width, 1.02 * g.width), (-1.02 * g.depth, 0.04 * g.depth)
-    ratios = [(full_x[1] - full_x[0]) / (full_y[1] - full_y[0]), (zx[1] - zx[0]) / (zy[1] - zy[0])]
+    full_x, full_y, zx, zy, ratios = section_frames(g)
     fig = new_figure(4.9 * (ratios[0] + ratios[1]) + 0.6, 5.6)
     axF, axZ = fig.subplots(1, 2, width_ratios=ratios)
     marks = colormaps["tab10"]
