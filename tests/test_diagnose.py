@@ -5,6 +5,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from conftest import CASES
@@ -43,6 +44,16 @@ def test_concealed_effect_is_named_estimated_and_fixes_the_fit(name):
         prof = d.depth_profile(d.accepted[0])
         assert prof.has_interval and prof.low <= 16.0 <= prof.high and prof.high - prof.low < 1.0
         assert not prof.low_open and not prof.high_open
+        # the figure draws the accepted boundary at its depth, with its interval, on the panels that reach it
+        from geoback.inference.explore import explore
+        from geoback.reports.plots.diagnosis import before_after_figure
+        from geoback.reports.plots.instruments import BOUNDARY
+
+        fig = before_after_figure(d, explore(d.final_misfit, d.final, ("profiles",)))
+        drawn = [ln for ax in fig.axes for ln in ax.lines if ln.get_color() == BOUNDARY]
+        assert len(drawn) >= 2 and all(np.allclose(ln.get_ydata(), prof.z_hat) for ln in drawn)
+        assert all(ax.axison for ax in fig.axes)  # four instruments in 2 x 2: no empty panel
+        fig.clear()
     cause = "instrument" if name in INSTRUMENT else "ground"
     assert [s.hypothesis.cause for s in d.accepted] == [cause]
     assert d.causes[cause] and not d.causes["ground" if cause == "instrument" else "instrument"]

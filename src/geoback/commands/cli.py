@@ -35,6 +35,14 @@ def _main(version: bool = typer.Option(False, "--version", callback=_version, is
     """Maximum-likelihood back-analysis of tunnel and excavation instrumentation."""
 
 
+class ObjectiveMap(str, Enum):
+    """How `run --plots` draws the objective map (``inference.explore``)."""
+
+    auto = "auto"
+    model = "model"
+    linearised = "linearised"
+
+
 class Method(str, Enum):
     """The estimation method (paper eqns 27-30); case-insensitive on the command line."""
 
@@ -159,8 +167,9 @@ def schema():
 @friendly
 def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
          out: Optional[str] = typer.Option(None, help=OUT_HELP),
+         plots: bool = typer.Option(True, help="also draw the mesh with its layers and instruments (mesh.png)"),
          allow_large: bool = _allow_large()):
-    """Mesh the case with gmsh; write mesh.msh and mesh.vtu."""
+    """Mesh the case with gmsh; write mesh.msh, mesh.vtu and a picture of it, mesh.png."""
     out = _check_out(out)
     from geoback.physics.mesh import build_mesh
     from geoback.reports.fields import write_mesh
@@ -172,7 +181,12 @@ def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
     with result_set(folder, "mesh") as staging:
         write_mesh(m, staging / "mesh.msh")
         write_mesh(m, staging / "mesh.vtu")
-    typer.echo(f"{len(m.triangles)} elements, {len(m.nodes)} nodes ({2 * len(m.nodes)} dofs) -> {folder}/mesh.msh, mesh.vtu")
+        if plots:
+            from geoback.reports.plots import save_mesh_picture
+
+            save_mesh_picture(loaded, m, staging)
+    typer.echo(f"{len(m.triangles)} elements, {len(m.nodes)} nodes ({2 * len(m.nodes)} dofs) -> {folder}/mesh.msh, "
+               f"mesh.vtu" + (", mesh.png" if plots else ""))
 
 
 @app.command()
@@ -190,6 +204,8 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              seed: int = typer.Option(0, help="seed of the noise"),
              readings_out: Optional[str] = typer.Option(None, help="write study data: readings as a CSV usable as "
                                                         "readings_file (a finer mesh than the case's by default)"),
+             plots: bool = typer.Option(False, "--plots", help="also draw the predicted readings along every "
+                                        "instrument (predicted.png and .svg)"),
              as_json: bool = _json_option(),
              allow_large: bool = _allow_large()):
     """Forward run: predicted readings and the field; or study data (--readings-out, --noise)."""
@@ -239,13 +255,15 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
     from geoback.inference.parameters import resolve_values
 
     values = {**analysis.values, **resolve_values(analysis.simulation, assignments)}
-    res = run_simulation(analysis, folder, values=values, vtu=vtu and loaded.case.output.vtu)
+    res = run_simulation(analysis, folder, values=values, vtu=vtu and loaded.case.output.vtu, plots=plots,
+                         values_text=", ".join(f"{k} = {v}" for k, v in assignments.items()))
     used = ", ".join(f"{k} = {v}" for k, v in assignments.items())
     if as_json:
         _print_json(folder / "predicted.json")
     typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs"
                f"{' with ' + used if used else ''} -> {folder}/predicted.csv"
-               + (", lining.csv, lining.png" if res.get("lining") is not None else ""), err=as_json)
+               + (", lining.csv, lining.png" if res.get("lining") is not None else "")
+               + (", predicted.png" if plots else ""), err=as_json)
 
 
 @app.command()
@@ -294,6 +312,12 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         method: Optional[Method] = typer.Option(None, case_sensitive=False,
                                                 help="estimation method (default: the case's fit.method)"),
         plots: bool = typer.Option(False, "--plots", help="also write figures (PNG and SVG)"),
+        objective_map: ObjectiveMap = typer.Option(
+            ObjectiveMap.auto, "--objective-map", case_sensitive=False,
+            help="how --plots draws the objective map: 'auto' computes it with the model where one factorisation "
+                 "serves the grid, else from the model linearised at the estimate (and runs the other method "
+                 "for comparison only where it is as cheap); 'model' computes both with the model however long "
+                 "it takes; 'linearised' always linearises"),
         profile: bool = typer.Option(False, "--profile", help="profile-likelihood intervals for every parameter "
                                      "(by default only where the linearised interval is unreliable)"),
         strict: bool = typer.Option(False, "--strict", help="exit 3 if the result carries any warning (for CI)"),
@@ -309,27 +333,38 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
     from geoback.commands.run import run_case
 
     names: list[str] = []
+    units: list[str] = []
     talk = not quiet and not as_json
+    from geoback.reports.units import number, shown
 
     def progress(it):
         if talk:
-            vals = "  ".join(f"{n} = {v:.6g}" for n, v in zip(names, it.p))
+            vals = "  ".join(f"{n} = {number(v * shown(u, v)[0])}" + ("" if shown(u, v)[1] in ("-", "")
+                                                                       else f" {shown(u, v)[1]}")
+                             for n, u, v in zip(names, units, it.p))
             mark = ("accepted" if it.accepted else "rejected" if it.J < float("inf")
                     else "rejected (the model has no solution there)")
             _say(f"iteration {it.k:2d}  mu = {it.mu:8.2g}  J = {it.J:<12.6g} {mark}  {vals}")
 
     def named(analysis):
         names[:] = analysis.parameters.names
+        units[:] = analysis.parameters.units
 
     matched: list[str] = []
     res = run_case(loaded, folder, method=method, progress=progress, plots=plots, say=_say if talk else None,
-                   prepared=named, profile="all" if profile else "auto", matched=matched.extend)
+                   prepared=named, profile="all" if profile else "auto", matched=matched.extend,
+                   objective_map=objective_map.value)
     if as_json:
         _print_json(folder / "summary.json")
     elif not quiet:
         typer.echo(report_text(res, readings=matched))
     s = summary(res)
-    estimates = ", ".join(f"{n} = {v['estimate']:.6g} +/- {v['std']:.3g}" for n, v in s["parameters"].items())
+    def _estimate(n, v):
+        fct, unit = shown(v["unit"], v["estimate"])
+        unit = "" if unit in ("-", "") else f" {unit}"
+        return f"{n} = {number(v['estimate'] * fct)}{unit} +/- {number(v['std'] * fct, 3)}{unit}"
+
+    estimates = ", ".join(_estimate(n, v) for n, v in s["parameters"].items())
     warned = f"; {len(res.caveats)} warning(s): {', '.join(sorted({c.code for c in res.caveats}))}" \
         if res.caveats else ""
     typer.echo(f"{res.status}: {estimates} ({s['iterations']} iterations, {s['factorisations']} "

@@ -10,13 +10,15 @@ from geoback.case.strength import is_plastic
 
 
 def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=None, vtu: bool | None = None,
-             plots: bool = False, say=None, prepared=None, profile: str = "auto", matched=None) -> Identification:
+             plots: bool = False, say=None, prepared=None, profile: str = "auto", matched=None,
+             objective_map: str = "auto") -> Identification:
     """identify() the case, explore what the field file and figures need, write all outputs to `out`.
 
     progress(iteration) follows the fit; say(text) the steps after it and how the readings were
     matched; prepared(analysis) is called once the case is meshed and read, before the fit;
-    matched(lines) with how the readings were matched (also in report.md and summary.json).
-    Instruments without readings are refused, named."""
+    matched(lines) with how the readings were matched (also in report.md and summary.json);
+    objective_map: how the objective map of the figures is drawn ('auto', 'model', 'linearised':
+    ``inference.explore``). Instruments without readings are refused, named."""
     from geoback.inference.explore import explore
     from geoback.observation.readings import readings_report, require_readings
     from geoback.reports.report import write_run
@@ -52,6 +54,7 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
         from geoback.reports.plots import exploration_for
 
         what = tuple(sorted(set(what) | set(exploration_for())))
-    exploration = explore(analysis.misfit, res, what, analysis.settings, progress=say) if what else None
+    exploration = explore(analysis.misfit, res, what, analysis.settings, progress=say,
+                          objective_map=objective_map) if what else None
     write_run(res, Path(out), exploration, plots=plots, readings=lines)
     return res

@@ -32,8 +32,10 @@ def forward(analysis: Analysis, values: Mapping | None = None) -> np.ndarray:
     return analysis.simulation.predict(values if values is not None else analysis.values).x
 
 
-def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: bool = True) -> dict:
-    """Predicted readings (CSV, JSON) and optionally the field (VTU) for the case's values."""
+def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: bool = True, plots: bool = False,
+             values_text: str = "") -> dict:
+    """Predicted readings (CSV, JSON) and optionally the field (VTU) and the predicted readings along
+    every instrument (predicted.png/.svg; `values_text`: the values set, in words) for the case's values."""
     from geoback.reports.report import write_field
 
     sim = analysis.simulation
@@ -67,6 +69,20 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
             fig = lining_figure(forces)
             try:
                 save_figures({"lining": fig}, staging)
+            finally:
+                fig.clear()
+        if plots:  # the readings predicted along every instrument
+            import matplotlib
+
+            from geoback.inference.explore import profiles
+            from geoback.reports.plots import save_figures
+            from geoback.reports.plots.common import RC
+            from geoback.reports.plots.instruments import predicted_figure
+
+            with matplotlib.rc_context(RC):
+                fig = predicted_figure(sim.survey.blocks, x, profiles(sim, values), analysis.case.name, values_text)
+            try:
+                save_figures({"predicted": fig}, staging)
             finally:
                 fig.clear()
         if zone is not None:  # the yielded ground: CSV and figure

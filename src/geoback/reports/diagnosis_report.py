@@ -7,6 +7,7 @@ import numpy as np
 
 from geoback.outputs import write_atomic, write_json
 from geoback.reports.resultsets import result_set
+from geoback.reports.units import number, shown
 from geoback.diagnosis.compare import detectable_text
 from geoback.diagnosis.hypotheses import CAUSES
 from geoback.diagnosis.procedure import NO_ADDITION
@@ -47,21 +48,25 @@ def _estimates(s) -> list[tuple[str, float, float, float, float]]:
 
 
 def _num(v: float) -> str:
-    return f"{v:.4g}" if np.isfinite(v) else ("∞" if v > 0 else "-∞")
+    return number(v, 4) if np.isfinite(v) else ("∞" if v > 0 else "-∞")
 
 
 def _accepted_words(d, s) -> str:
     """One accepted hypothesis with its parameters from the final joint fit."""
     params = d.final.parameters
-    unit = {n: ("" if params.units[i] in ("-", "") else f" {params.units[i]}") for i, n in enumerate(params.names)}
-    def one(n, v, sd, lo, hi):
+    case_unit = dict(zip(params.names, params.units))
+
+    def one(n, v, sd, lo, hi):  # in engineering units: a modulus in MPa (units.shown)
+        f, shown_unit = shown(case_unit.get(n, "-"), v)
+        u = "" if shown_unit in ("-", "") else f" {shown_unit}"
+        v, sd, lo, hi = v * f, sd * f, lo * f, hi * f
         lo_open, hi_open = d.open_ends(n)
         if lo_open or hi_open:
             ends = (f"from {'its lower limit' if lo_open else _num(lo)} to {'its upper limit' if hi_open else _num(hi)}"
                     f" by profile likelihood, open where the readings do not bound it")
-            return f"{n} = {v:.4g}{unit.get(n, '')} (95 % {ends})"
+            return f"{n} = {number(v, 4)}{u} (95 % {ends})"
         how = ", profile likelihood" if (n in d.final_intervals or n in d.final.profiled) else ""
-        return f"{n} = {v:.4g} ± {sd:.2g}{unit.get(n, '')} (95 % [{_num(lo)}, {_num(hi)}]{how})"
+        return f"{n} = {number(v, 4)} ± {number(sd, 2)}{u} (95 % [{_num(lo)}, {_num(hi)}]{how})"
 
     est = "; ".join(one(*e) for e in d.estimates(s))
     prof = d.depth_profile(s)

@@ -14,13 +14,39 @@ WHAT = {"ux": "horizontal displacement", "uy": "vertical displacement (up +)", "
         "M": "bending moment", "V": "shear force"}
 
 
+def positions(fc, rows) -> tuple[np.ndarray, str]:
+    """Where each row of a forecast is, as forecast.csv, the report and the figure give it: depth below
+    the surface along a vertical line or column of points (a vertical extensometer too, which the
+    forecast counts from its reference end), otherwise the forecast's own position."""
+    rows = np.asarray(rows)
+    x, y = fc.x[rows], fc.y[rows]
+    label = fc.position_label[rows[0]]
+    if len(rows) > 1 and not label.startswith("angle"):
+        span = max(float(np.ptp(x)), float(np.ptp(y)), 1e-12)
+        if np.ptp(x) <= 1e-9 * span and np.ptp(y) > 0:
+            return -y, "depth [m]"
+    return fc.position[rows], label
+
+
+def _positions_by_row(fc) -> tuple[np.ndarray, list[str]]:
+    pos, label = np.array(fc.position, float), list(fc.position_label)
+    for name in fc.names:
+        rows = fc.rows(name)
+        p, lab = positions(fc, rows)
+        pos[rows] = p
+        for i in rows:
+            label[i] = lab
+    return pos, label
+
+
 def forecast_rows(fc) -> list[list]:
     nan = np.full(len(fc.value), np.nan)
+    position, position_label = _positions_by_row(fc)
     slo = fc.sampled_low if fc.sampled_low is not None else nan
     shi = fc.sampled_high if fc.sampled_high is not None else nan
     sex = fc.sampled_exceed if fc.sampled_exceed is not None else nan
-    return [[fc.forecast[i], fc.kind[i], fc.stage[i], fc.quantity[i], fc.unit[i], fc.x[i], fc.y[i], fc.position[i],
-             fc.position_label[i], fc.value[i], fc.std[i], fc.low[i], fc.high[i], slo[i], shi[i], fc.alert[i],
+    return [[fc.forecast[i], fc.kind[i], fc.stage[i], fc.quantity[i], fc.unit[i], fc.x[i], fc.y[i], position[i],
+             position_label[i], fc.value[i], fc.std[i], fc.low[i], fc.high[i], slo[i], shi[i], fc.alert[i],
              fc.p_exceed[i], sex[i]] for i in range(len(fc.value))]
 
 
@@ -30,17 +56,19 @@ def _show(v: float, unit: str) -> str:
 
 
 def _where(fc, i: int) -> str:
-    label = fc.position_label[i]
+    rows = fc.rows(fc.forecast[i])
+    pos, label = positions(fc, rows)
+    at = float(pos[int(np.flatnonzero(rows == i)[0])])
     if label.startswith("offset"):
-        return f"at {fc.position[i]:.3g} m from the tunnel axis"
+        return f"at {at:.3g} m from the tunnel axis"
     if label.startswith("distance along"):
-        return f"at {fc.position[i]:.3g} m along the line ({fc.x[i]:.3g}, {fc.y[i]:.3g})"
+        return f"at {at:.3g} m along the line ({fc.x[i]:.3g}, {fc.y[i]:.3g})"
     if label.startswith("angle"):
-        return f"at {fc.position[i]:.0f}° from the crown"
+        return f"at {at:.0f}° from the crown"
     if label.startswith("depth"):
-        return f"at {fc.position[i]:.3g} m depth"
+        return f"at {at:.3g} m depth"
     if label.startswith("distance"):
-        return f"at {fc.position[i]:.3g} m from the reference end"
+        return f"at {at:.3g} m from the reference end"
     return f"at ({fc.x[i]:.3g}, {fc.y[i]:.3g})"
 
 

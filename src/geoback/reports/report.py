@@ -13,6 +13,7 @@ import numpy as np
 from geoback import __version__
 from geoback.outputs import write_atomic, write_csv, write_json, write_matrix_csv
 from geoback.reports.resultsets import result_set
+from geoback.reports.units import number, rounded, shown
 
 
 def reading_label(lab, staged: bool = False) -> str:
@@ -101,15 +102,22 @@ def report_text(res, exploration=None, readings=()) -> str:
               f"- AIC = {rel.aic:.6g}, BIC = {rel.bic:.6g}, condition number = {rel.condition:.3g}", "",
               "| parameter | unit | initial | estimate | std | 95 % interval |", "|---|---|---|---|---|---|"]
     lo, hi = res.intervals95()
+    case_units = []
     for i, n in enumerate(params.names):
+        fct, unit = shown(params.units[i], f.p[i])
         bound = " (at bound)" if f.at_bound[i] else ""
         how, (lo_open, hi_open) = "", (False, False)
         if n in res.profiled:
             how, (lo_open, hi_open) = " (profile likelihood)", res.profiled[n][2:]
-        ends = (f"≤ its bound {lo[i]:.6g}" if lo_open else f"{lo[i]:.6g}",
-                f"≥ its bound {hi[i]:.6g}" if hi_open else f"{hi[i]:.6g}")
-        lines.append(f"| {n} | {params.units[i]} | {params.initial[i]:.6g} | {f.p[i]:.6g}{bound} | "
-                     f"{rel.std[i]:.3g}{_cv(f.p[i], rel.std[i])} | [{ends[0]}, {ends[1]}]{how} |")
+        ends = (f"≤ its bound {number(lo[i] * fct)}" if lo_open else number(lo[i] * fct),
+                f"≥ its bound {number(hi[i] * fct)}" if hi_open else number(hi[i] * fct))
+        lines.append(f"| {n} | {unit} | {number(params.initial[i] * fct)} | {number(f.p[i] * fct)}{bound} | "
+                     f"{number(rel.std[i] * fct, 3)}{_cv(f.p[i], rel.std[i])} | [{ends[0]}, {ends[1]}]{how} |")
+        if fct != 1.0:
+            case_units.append(f"{n} = {f.p[i]:.6g} ± {number(rel.std[i], 3)} {params.units[i]}")
+    if case_units:
+        lines += ["", "In the case's units (as `parameters:` and summary.json take them): " + ", ".join(case_units)
+                  + "."]
     lines += prior_posterior_lines(res)
     if rel.parameter_dof is not None:
         lines += ["", "The error scales are estimated: the intervals are Student t on "
@@ -136,12 +144,28 @@ def report_text(res, exploration=None, readings=()) -> str:
     zone = getattr(exploration, "plastic_zone", None)
     if zone is not None:
         lines += zone.lines()
+    lines += figure_lines(res, exploration)
     text = "\n".join(lines) + "\n"
     if res.forecasts is not None:
         from geoback.reports.forecast_report import report_section
 
         text += report_section(res.forecasts)
     return text
+
+
+def figure_lines(res, exploration) -> list[str]:
+    """What the figures' objective map shows (the model's own or linearised) and why a path is missing."""
+    slc = getattr(exploration, "slice", None)
+    if slc is None:
+        return []
+    from geoback.inference.explore import other_method
+    from geoback.reports.plots.common import METHOD_NAMES
+
+    out = ["", f"Figures: the objective map (objective_contours.png) shows {slc.words()}."]
+    note = getattr(exploration, "other_note", "")
+    if exploration.other is None and note:
+        out.append(f"{METHOD_NAMES.get(other_method(res.fit.method), 'The other method')} {note}.")
+    return out
 
 
 def prior_posterior_lines(res) -> list[str]:
@@ -151,10 +175,13 @@ def prior_posterior_lines(res) -> list[str]:
         return []
     out = ["", "What the readings tell (prior → posterior std; identifiability 0: nothing beyond the prior, "
                "1: fixed by the readings):", "",
-           "| parameter | prior std | prior | posterior std | reduction | identifiability |", "|---|---|---|---|---|---|"]
+           "| parameter | unit | prior std | prior | posterior std | reduction [%] | identifiability [-] |",
+           "|---|---|---|---|---|---|---|"]
+    units = res.parameters.units
     for i, n in enumerate(pp.names):
-        out.append(f"| {n} | {pp.prior_std[i]:.3g} | {pp.prior_source[i]} | {pp.posterior_std[i]:.3g} | "
-                   f"{100 * pp.reduction[i]:.0f} % | {pp.identifiability[i]:.2f} |")
+        fct, unit = shown(units[i], res.fit.p[i])
+        out.append(f"| {n} | {unit} | {number(pp.prior_std[i] * fct, 3)} | {pp.prior_source[i]} | "
+                   f"{number(pp.posterior_std[i] * fct, 3)} | {100 * pp.reduction[i]:.0f} | {pp.identifiability[i]:.2f} |")
     if "usual range" in pp.prior_source:
         out += ["", "(usual range: no prior in the case, so an uninformed one spanning the usual range for ground "
                     "as its 95 % interval, in ln p for positive quantities.)"]
@@ -171,6 +198,8 @@ def chi2_line(rel) -> str:
             f"reduced chi-square = {rel.reduced_chi2:.4g}, p-value = {rel.p_value:.3g} (Satterthwaite)")
 
 
+READINGS_HEADER = ["instrument", "kind", "station", "stage", "component", "x [m]", "y [m]", "measured [mm]",
+                   "computed [mm]", "residual [mm]", "whitened_residual [-]", "leverage [-]"]
 ERROR_SCALE_HEADER = ["group", "instruments", "treatment", "readings", "dof", "k", "k_low95", "k_high95",
                       "k_readings", "p_stated", "p_allowed", "allowed_test", "ratio_to_others", "J_stated", "text"]
 
@@ -186,7 +215,8 @@ def error_scale_lines(rel) -> list[str]:
     if not rel.error_scales:
         return []
     out = ["", "Error scales (k = true σ / stated σ; c = readings minus the parameters' share):", "",
-           "| group | treatment | readings | c | k | 95 % interval | p (stated σ) |", "|---|---|---|---|---|---|---|"]
+           "| group | treatment | readings [-] | c [-] | k [-] | 95 % interval of k [-] | p (stated σ) [-] |",
+           "|---|---|---|---|---|---|---|"]
     for e in rel.error_scales:
         k = f"{e.factor:.3g}" if e.estimated else f"1 (readings: {e.readings_factor:.3g})"
         out.append(f"| {e.name} | {e.treatment} | {e.readings} | {e.dof:.3g} | {k} | [{e.low:.3g}, {e.high:.3g}] | "
@@ -223,13 +253,16 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
     out = Path(out)
     lo, hi = res.intervals95()
     pp = res.prior_posterior
+    shown_as = [shown(params.units[i], f.p[i]) for i in range(params.n)]
     write_csv(out / "parameters.csv",
               ["name", "unit", "initial", "estimate", "std", "ci95_low", "ci95_high", "ci95_method", "at_bound",
-               "prior_std", "prior_source", "posterior_std", "identifiability"],
+               "prior_std", "prior_source", "posterior_std", "identifiability",
+               "unit_shown", "estimate_shown", "std_shown", "ci95_low_shown", "ci95_high_shown"],
               [[n, params.units[i], params.initial[i], f.p[i], rel.std[i], lo[i], hi[i],
                 "profile likelihood" if n in res.profiled else "linearised", bool(f.at_bound[i])]
                + ([pp.prior_std[i], pp.prior_source[i], pp.posterior_std[i], pp.identifiability[i]] if pp is not None
                   else ["", "", "", ""])
+               + [shown_as[i][1]] + [rounded(v * shown_as[i][0]) for v in (f.p[i], rel.std[i], lo[i], hi[i])]
                for i, n in enumerate(names)])
     write_matrix_csv(out / "covariance.csv", names, rel.covariance)
     write_matrix_csv(out / "correlation.csv", names, rel.correlation)
@@ -240,11 +273,10 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
     write_matrix_csv(out / "information_density.csv", labels, rel.information_density)
     measured = res.data.measured
     residual = measured - f.x
-    write_csv(out / "readings.csv",
-              ["instrument", "kind", "station", "stage", "component", "x", "y", "measured", "computed", "residual",
-               "whitened_residual", "leverage"],
-              [[lab.instrument, lab.kind, lab.station, lab.stage or "", lab.component, lab.x, lab.y, measured[i],
-                f.x[i], residual[i], rel.whitened_residual[i], rel.leverage[i]] for i, lab in enumerate(res.data.labels)])
+    write_csv(out / "readings.csv", READINGS_HEADER,
+              [[lab.instrument, lab.kind, lab.station, lab.stage or "", lab.component, rounded(lab.x), rounded(lab.y),
+                rounded(1e3 * measured[i]), rounded(1e3 * f.x[i]), rounded(1e3 * residual[i]),
+                rounded(rel.whitened_residual[i]), rounded(rel.leverage[i])] for i, lab in enumerate(res.data.labels)])
     write_csv(out / "error_scales.csv", ERROR_SCALE_HEADER, error_scale_rows(rel))
     write_csv(out / "iterations.csv", ["iteration", "mu", "J"] + names + ["accepted"],
               [[h.k, h.mu, h.J] + list(h.p) + [h.accepted] for h in f.history])

@@ -6,6 +6,8 @@
 - ``information``: rows of Q for the readings of highest leverage, and Q itself (Figs. 5, 8);
 - ``instruments``: measured and computed readings along every instrument with +-2 sigma bands;
 - ``field``: the deformed mesh coloured by the displacement magnitude, with the instruments;
+- ``measured_vs_predicted``: every reading, measured against computed, with ±2σ and the 1:1 line;
+- ``mesh``: the finite-element mesh by layer, with the instruments' stations;
 - ``lining``: thrust, bending moment and shear around the lining per construction stage (models
   with a lining only);
 - ``plastic``: the plastic zone around the tunnel after every stage (ground that can yield only).
@@ -29,18 +31,24 @@ from geoback.reports.plots.field import field_figure
 from geoback.reports.plots.information import information_density_figure
 from geoback.reports.plots.instruments import instruments_figure
 from geoback.reports.plots.lining import lining_figure
+from geoback.reports.plots.measured import measured_vs_predicted_figure
+from geoback.reports.plots.mesh import mesh_figure
 from geoback.reports.plots.objective import objective_contours_figure
 from geoback.reports.plots.plastic import plastic_zone_figure
 
-FIGURES = ("objective_contours", "convergence", "information_density", "instruments", "field")
+FIGURES = ("objective_contours", "convergence", "information_density", "instruments", "field",
+           "measured_vs_predicted", "mesh")
 OPTIONAL = ("lining", "plastic_zone")  # figures of what only some models have, built when the exploration holds it
 FORMATS = ("png", "svg")
 NEEDS = {"objective_contours": ("slice", "other"), "convergence": ("other",), "information_density": (),
-         "instruments": ("profiles",), "field": ("field", "profiles"),
+         "instruments": ("profiles",), "field": ("field", "profiles"), "measured_vs_predicted": (),
+         "mesh": ("field",),
          "lining": ("lining",), "plastic_zone": ("plastic_zone",)}  # what each reads from the exploration
 _BUILD = {"objective_contours": objective_contours_figure, "convergence": convergence_figure,
           "information_density": lambda res, exploration: information_density_figure(res),
           "instruments": instruments_figure, "field": field_figure,
+          "measured_vs_predicted": measured_vs_predicted_figure,
+          "mesh": lambda res, exploration: mesh_figure(exploration.field.mesh, res.case, res.data.blocks, res.name),
           "lining": lambda res, exploration: lining_figure(exploration.lining, res) if exploration.lining else None,
           "plastic_zone": lambda res, exploration: (plastic_zone_figure(exploration.plastic_zone, res)
                                                     if exploration.plastic_zone else None)}
@@ -70,9 +78,9 @@ def _compact_png(data: bytes) -> bytes:
         from PIL import Image
 
         im = Image.open(io.BytesIO(data)).convert("RGB")
-        q = im.quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
-        buf = io.BytesIO()
-        q.save(buf, format="PNG", optimize=True)
+        q = im.quantize(colors=256, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)  # a tenth of
+        buf = io.BytesIO()  # median cut's time, as faithful on figures of few colours
+        q.save(buf, format="PNG", compress_level=6)
         return buf.getvalue() if buf.tell() < len(data) else data
     except Exception:  # noqa: BLE001 - Pillow missing or too old: keep matplotlib's PNG
         return data
@@ -87,9 +95,11 @@ def save_figures(figs: dict, out: Path, formats: tuple[str, ...] = FORMATS, dpi:
     paths = []
     with matplotlib.rc_context(RC):
         for name, fig in figs.items():
-            for fmt in formats:
+            for k, fmt in enumerate(formats):
                 buf = io.BytesIO()
                 meta = {"Date": None} if fmt == "svg" else {"Software": None} if fmt == "png" else None
+                if k == 1:  # laid out by the first format's drawing: the others keep its positions
+                    fig.set_layout_engine("none")
                 fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta)
                 data = buf.getvalue()
                 if fmt == "png" and compact:
@@ -100,6 +110,24 @@ def save_figures(figs: dict, out: Path, formats: tuple[str, ...] = FORMATS, dpi:
     return paths
 
 
+def save_mesh_picture(loaded, mesh, out: Path, formats: tuple[str, ...] = ("png",)) -> list[Path]:
+    """`geoback mesh`'s picture of the mesh (mesh.png) with the case's instruments where they can be
+    placed (a case whose instruments are not yet valid gets the mesh alone)."""
+    from geoback.errors import GeobackError
+    from geoback.observation.instruments import case_blocks
+
+    try:
+        blocks = case_blocks(loaded)
+    except GeobackError:
+        blocks = []
+    with matplotlib.rc_context(RC):
+        fig = mesh_figure(mesh, loaded.case, blocks)
+    try:
+        return save_figures({"mesh": fig}, out, formats)
+    finally:
+        fig.clear()
+
+
 def plot_run(res, exploration, out: Path, formats: tuple[str, ...] = FORMATS) -> list[Path]:
     """Build every figure of the run and write PNG and SVG files into `out`; return the paths."""
     figs = build_figures(res, exploration)
@@ -107,7 +135,7 @@ def plot_run(res, exploration, out: Path, formats: tuple[str, ...] = FORMATS) ->
         from geoback.reports.plots.forecast import forecast_figures
 
         with matplotlib.rc_context(RC):
-            figs.update(forecast_figures(res.forecasts))
+            figs.update(forecast_figures(res.forecasts, res))
     try:
         return save_figures(figs, out, formats)
     finally:

@@ -12,6 +12,8 @@ import numpy as np  # noqa: E402
 from matplotlib import patheffects  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from geoback.reports.units import shown  # noqa: E402
+
 DPI = 150
 HALO = [patheffects.withStroke(linewidth=2.5, foreground="white")]
 BEFORE = "#d62728"  # colour of a second model's readings (a diagnosis' baseline)
@@ -26,12 +28,18 @@ RC = {"font.size": 9.5, "axes.titlesize": 10.5, "axes.labelsize": 9.5, "legend.f
 
 
 def display(name: str, unit: str, value: float) -> tuple[float, str]:
-    """Factor and unit to show a parameter with (kPa moduli in MPa)."""
-    if unit == "kPa" and abs(value) >= 1e3:
-        return 1e-3, "MPa"
-    if unit == "kPa/m" and abs(value) >= 1e3:
-        return 1e-3, "MPa/m"
-    return 1.0, unit or "-"
+    """Factor and unit to show a parameter with (kPa moduli in MPa, from 1 GPa in GPa: ``units.shown``)."""
+    return shown(unit, value)
+
+
+def plain(v: float, digits: int = 3) -> str:
+    """A number with `digits` significant digits, without e-notation between 1e-3 and 1e6 (1081, not
+    1.08e+03)."""
+    if not np.isfinite(v):
+        return f"{v}"
+    if 1e3 <= abs(v) < 1e6:
+        return f"{v:.0f}"
+    return f"{v:.{digits}g}"
 
 
 def axis_label(params, i: int, value: float) -> str:
@@ -75,6 +83,18 @@ def nice_factor(x: float) -> float:
 
 def new_figure(w: float, h: float) -> Figure:
     return Figure(figsize=(w, h), dpi=DPI, layout="constrained")
+
+
+def section_frames(g) -> tuple:
+    """Limits of the two panels of a cross-section (the whole half model; about 2.5 radii around the
+    tunnel, cut at the ground surface) and their width ratios: (full_x, full_y, zoom_x, zoom_y, ratios)."""
+    cy, R = -g.axis_depth, g.radius
+    zx = (-0.04 * 2.6 * R, min(g.width, 2.6 * R))
+    ztop = 0.0 if cy + 2.4 * R > -1.2 * R else cy + 2.4 * R  # keep a shallow cover whole
+    zy = (max(-g.depth, cy - 2.4 * R), ztop + 0.04 * 2.6 * R)
+    full_x, full_y = (-0.02 * g.width, 1.02 * g.width), (-1.02 * g.depth, 0.04 * g.depth)
+    ratios = [(full_x[1] - full_x[0]) / (full_y[1] - full_y[0]), (zx[1] - zx[0]) / (zy[1] - zy[0])]
+    return full_x, full_y, zx, zy, ratios
 
 
 def direction_words(v: np.ndarray) -> str:

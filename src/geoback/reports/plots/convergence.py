@@ -8,6 +8,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 
+from geoback.inference.explore import other_method
 from geoback.reports.plots.common import METHOD_NAMES, METHOD_STYLE, accepted_steps, new_figure, value_text
 
 
@@ -58,6 +59,10 @@ def convergence_figure(res, exploration) -> Figure:
     for ax in (axJ, axP):
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.grid(True, which="major", color="0.9", lw=0.6)
-    fig.suptitle(f"Convergence ({res.weighting} weighting)", fontsize=11)
+    title = f"Convergence ({res.weighting} weighting)"
+    note = getattr(exploration, "other_note", "") if exploration is not None else ""
+    if other is None and note:
+        title += f"\n{METHOD_NAMES.get(other_method(res.fit.method), 'the other method')} {note}"
+    fig.suptitle(title, fontsize=11)
     return fig
 

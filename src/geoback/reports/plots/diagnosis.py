@@ -1,8 +1,24 @@
 """Measured vs computed along each instrument, before and after adding the missing physics:
-the instruments figure of `geoback run --plots` at the final model, with the baseline dashed."""
+the instruments figure of `geoback run --plots` at the final model, with the baseline dashed and an
+accepted layer boundary drawn at its depth with its 95 % interval."""
 from __future__ import annotations
 
 from pathlib import Path
+
+
+def boundaries(d) -> list:
+    """Every layer boundary the diagnosis accepted: its depth and 95 % interval (profile likelihood)."""
+    from geoback.reports.plots.instruments import Boundary
+
+    out = []
+    for s in d.accepted:
+        prof = d.depth_profile(s)
+        if prof is None or not prof.z_hat == prof.z_hat:
+            continue
+        ci = f", 95 % {prof.interval_text()}" if prof.has_interval else ""
+        out.append(Boundary(float(prof.z_hat), float(prof.low), float(prof.high),
+                            f"identified boundary in '{prof.layer}' at {prof.z_hat:.3g} m depth{ci} (band)"))
+    return out
 
 
 def before_after_figure(d, exploration=None):
@@ -19,7 +35,7 @@ def before_after_figure(d, exploration=None):
              f"χ²/dof {b.reduced_chi2:.3g} (p = {b.p_value:.2g}) → {f.reduced_chi2:.3g} (p = {f.p_value:.2g})")
     with matplotlib.rc_context(RC):
         return instruments_figure(d.final, exploration, before=d.baseline_fit.x, before_label="baseline model (before)",
-                                  title=title)
+                                  title=title, boundaries=boundaries(d))
 
 
 def plot_before_after(d, out: Path, exploration=None) -> list[Path]:

@@ -6,12 +6,14 @@ import textwrap
 import matplotlib
 import numpy as np
 from matplotlib import colormaps
+from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 from matplotlib.tri import Triangulation
 
-from geoback.reports.plots.common import HALO, estimate_text, new_figure, nice_factor
+from geoback.reports.plots.common import HALO, section_frames, estimate_text, new_figure, nice_factor
 
+LINING = "#2a6f97"
 FIELD_TARGET = 0.35  # the largest displacement is drawn as about this fraction of the tunnel radius
 # (rounded down to a magnification of 1, 2 or 5 x 10^k)
 
@@ -26,6 +28,14 @@ def field_figure(res, exploration) -> Figure:
     factor = nice_factor(FIELD_TARGET * g.radius / umax) if umax > 0 else 1.0
     xy = mesh.nodes + factor * u
     T = Triangulation(xy[:, 0], xy[:, 1], mesh.triangles[:, :3])
+    cons = getattr(res.case, "construction", None)
+    lining = cons.lining if cons is not None else None
+    in_lining = (mesh.region == mesh.region_names.index(lining.name)) if (
+        lining is not None and lining.name in mesh.region_names) else np.zeros(len(mesh.triangles), bool)
+    if in_lining.any():  # the ground coloured by |u|, the lining drawn apart
+        T.set_mask(in_lining)
+    stages = [st.name for st in cons.stages] if cons is not None else []
+    installed = next((st.name for st in cons.stages if st.install), None) if cons is not None else None
     inst = []  # (block, displaced stations, displaced line or None)
     first: dict = {}
     for b in res.data.blocks:
@@ -35,18 +45,13 @@ def field_figure(res, exploration) -> Figure:
         stations = block.stations + factor * prof.station_displacement
         if block.kind == "convergence":  # a straight chord between its two (displaced) ends
             line_moved = stations
-        elif prof.line is not None:
+        elif prof.line is not None and block.kind != "points":  # (points: the stations alone)
             line_moved = prof.line + factor * prof.line_displacement
         else:
             line_moved = None
         inst.append((block, stations, line_moved))
     cx, cy, R = 0.0, -g.axis_depth, g.radius
-    # zoom on the tunnel: about 2.5 radii around it, cut at the ground surface
-    zx = (-0.04 * 2.6 * R, min(g.width, 2.6 * R))
-    ztop = 0.0 if cy + 2.4 * R > -1.2 * R else cy + 2.4 * R  # keep a shallow cover whole
-    zy = (max(-g.depth, cy - 2.4 * R), ztop + 0.04 * 2.6 * R)
-    full_x, full_y = (-0.02 * g.width, 1.02 * g.width), (-1.02 * g.depth, 0.04 * g.depth)
-    ratios = [(full_x[1] - full_x[0]) / (full_y[1] - full_y[0]), (zx[1] - zx[0]) / (zy[1] - zy[0])]
+    full_x, full_y, zx, zy, ratios = section_frames(g)
     fig = new_figure(4.9 * (ratios[0] + ratios[1]) + 1.6, 5.6)
     axF, axZ = fig.subplots(1, 2, width_ratios=ratios)
     top = umax * 1e3 if umax > 0 else 1.0
@@ -59,6 +64,11 @@ def field_figure(res, exploration) -> Figure:
         tpc = ax.tricontourf(T, umag * 1e3, levels=levels, cmap=cmap, norm=norm)
         tpc.set_rasterized(True)
         ax.triplot(T, color="k", lw=0.3 if zoom else 0.2, alpha=0.3, rasterized=True)
+        if in_lining.any():
+            tri = xy[mesh.triangles[in_lining][:, :3]]
+            ax.add_collection(PolyCollection(tri, facecolors=LINING, edgecolors=LINING, linewidths=0.3, zorder=3,
+                                             label=f"lining '{lining.name}' ({lining.thickness:g} m, installed at "
+                                                   f"stage '{installed}'), deformed"))
         ax.plot(cx + R * np.cos(theta), cy + R * np.sin(theta), color="#1f77b4", lw=1.4, ls="--",
                 label="tunnel wall before excavation")
         ax.plot([0, g.width, g.width, 0, 0], [0, 0, -g.depth, -g.depth, 0], color="0.35", lw=0.9, ls=":",
@@ -79,7 +89,7 @@ def field_figure(res, exploration) -> Figure:
             sel = ((mesh.nodes[:, 0] <= zx[1]) & (mesh.nodes[:, 1] >= zy[0]) & (mesh.nodes[:, 1] <= zy[1])
                    & (np.arange(len(mesh.nodes)) < mesh.triangles[:, :3].max() + 1))
             corner = np.zeros(len(mesh.nodes), bool)
-            corner[mesh.triangles[:, :3].ravel()] = True
+            corner[mesh.triangles[~in_lining, :3].ravel()] = True  # the ground's corner nodes
             sel &= corner & (umag > 0.15 * umax)
             idx = np.flatnonzero(sel)
             if len(idx) > 90:
@@ -99,7 +109,9 @@ def field_figure(res, exploration) -> Figure:
     cb = fig.colorbar(tpc, ax=[axF, axZ], shrink=0.9, pad=0.015, aspect=30)
     cb.set_label("displacement magnitude |u| [mm]")
     est = textwrap.fill(f"({estimate_text(res.parameters, f.p)})", 110)
-    fig.suptitle(f"{res.name}: excavation-induced displacements at the estimate\n{est}\n"
+    when = (f" after stage '{stages[-1]}' (the last of {len(stages)}: {', '.join(stages)})" if len(stages) > 1
+            else f" after stage '{stages[0]}'" if stages else "")
+    fig.suptitle(f"{res.name}: excavation-induced displacements{when} at the estimate\n{est}\n"
                  f"max |u| = {umax * 1e3:.1f} mm; deformation magnified ×{factor:g} "
                  f"(max |u| drawn as {factor * umax / R:.0%} of the tunnel radius R = {R:g} m)", fontsize=10.5)
     return fig

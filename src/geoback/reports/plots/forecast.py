@@ -1,25 +1,41 @@
 """One figure per forecast: the forecast at the estimate with its 95 % band (linearised, and the
-range sampled through the model), the alert level, along the line, the instrument or the lining."""
+range sampled through the model), the alert level, along the line, the instrument or the lining;
+with the readings taken so far where the forecast is of something the instruments read (an
+instrument at a later stage, a line through settlement points)."""
 from __future__ import annotations
 
 import numpy as np
 
-from geoback.reports.plots.common import Figure
-from geoback.reports.forecast_report import SHOW, WHAT
+from geoback.reports.plots.common import Figure, new_figure
+from geoback.reports.forecast_report import SHOW, WHAT, positions
 
 BAND = "#1f77b4"
 SAMPLED = "#555555"
 ALERT = "#d62728"
+READ_COLOURS = ("#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#ff7f0e")
+DEPTH = "depth below the surface [m]"
 
 
 def _scale(unit: str) -> tuple[float, str]:
     return SHOW.get(unit, (1.0, unit))
 
 
-def _profile(ax, fc, rows, vertical: bool) -> None:
+def layout(fc, rows) -> tuple[np.ndarray, str, bool]:
+    """(position of each row, its axis label, vertical): a vertical line or column of points against
+    depth, a horizontal one against x (the offset from the tunnel axis), otherwise as the forecast
+    says (distance along the line, angle, reading number)."""
+    pos, label = positions(fc, rows)
+    if label.startswith("depth"):
+        return pos, DEPTH, True
+    x, y = fc.x[rows], fc.y[rows]
+    if len(rows) > 1 and not label.startswith("angle") and np.ptp(y) <= 1e-9 * max(np.ptp(x), 1e-12) < np.ptp(x):
+        return x, label if label.startswith("offset") else "horizontal distance from the symmetry axis x [m]", False
+    return pos, label, False
+
+
+def _profile(ax, fc, rows, pos, label, vertical: bool) -> None:
     """Value and bands along a position (depth downwards when `vertical`)."""
     f, unit = _scale(fc.unit[rows[0]])
-    pos = fc.position[rows]
     order = np.argsort(pos)
     r, pos = rows[order], pos[order]
     val, lo, hi = f * fc.value[r], f * fc.low[r], f * fc.high[r]
@@ -40,10 +56,10 @@ def _profile(ax, fc, rows, vertical: bool) -> None:
     what = f"{WHAT.get(q, q)} [{unit}]"
     if vertical:
         ax.set_xlabel(what)
-        ax.set_ylabel(fc.position_label[r[0]])
+        ax.set_ylabel(label)
         ax.invert_yaxis()
     else:
-        ax.set_xlabel(fc.position_label[r[0]])
+        ax.set_xlabel(label)
         ax.set_ylabel(what)
     ax.axhline(0, color="0.6", lw=0.6) if not vertical else ax.axvline(0, color="0.6", lw=0.6)
 
@@ -59,11 +75,91 @@ def _points(ax, fc, rows) -> None:
         ax.errorbar(k + 0.15, val, yerr=[val - f * fc.sampled_low[rows], f * fc.sampled_high[rows] - val], fmt="none",
                     color=SAMPLED, capsize=3, ls="--", label=f"95 % range, {fc.draws} draws")
     ax.set_xticks(k, labels, rotation=20 if len(k) > 3 else 0)
+    ax.set_xlabel("reading: point (x, y) [m] and component")
     ax.set_ylabel(f"forecast [{unit}]")
     ax.axhline(0, color="0.6", lw=0.6)
 
 
-def forecast_figure(fc, name: str) -> Figure:
+def _spread_points(ax, fc, rows, pos, label, vertical: bool) -> None:
+    """Points in a row or column: each forecast with its 95 % error bar at its real position."""
+    f, unit = _scale(fc.unit[rows[0]])
+    val = f * fc.value[rows]
+    pair = (lambda p, v: (v, p)) if vertical else (lambda p, v: (p, v))
+    err = [val - f * fc.low[rows], f * fc.high[rows] - val]
+    ax.errorbar(*pair(pos, val), **({"xerr": err} if vertical else {"yerr": err}), fmt="o", color=BAND, capsize=4,
+                label="forecast, 95 % band")
+    if fc.sampled_low is not None:
+        err = [val - f * fc.sampled_low[rows], f * fc.sampled_high[rows] - val]
+        ax.errorbar(*pair(pos, val), **({"xerr": err} if vertical else {"yerr": err}), fmt="none", color=SAMPLED,
+                    capsize=3, ls="--", label=f"95 % range, {fc.draws} draws")
+    what = f"{WHAT.get(fc.quantity[rows[0]], fc.quantity[rows[0]])} [{unit}]"
+    if vertical:
+        ax.set_xlabel(what)
+        ax.set_ylabel(label)
+        ax.invert_yaxis()
+        ax.axvline(0, color="0.6", lw=0.6)
+    else:
+        ax.set_xlabel(label)
+        ax.set_ylabel(what)
+        ax.axhline(0, color="0.6", lw=0.6)
+
+
+def readings_so_far(res, fc, name: str) -> list[tuple[str, str, np.ndarray, np.ndarray, np.ndarray]]:
+    """The readings behind a forecast: (instrument, stage, x, y, measured, sigma) of every stage an
+    instrument was read at before the forecast's stage, where the forecast is of that instrument
+    (kind 'instrument') or runs along a line through its points (the same component)."""
+    if res is None or getattr(res, "data", None) is None:
+        return []
+    rows = fc.rows(name)
+    kind, stage = fc.kind[rows[0]], fc.stage[rows[0]]
+    spec = next((f for f in (res.case.forecasts or []) if f.name == name), None)
+    sigma = np.sqrt(np.clip(np.diag(res.data.covariance), 0, None))
+    out = []
+    for block, sl in res.data.block_rows():
+        if block.stage == stage:
+            continue
+        labs = block.labels
+        xy = np.array([[lab.x, lab.y] for lab in labs])
+        keep = None
+        if kind == "instrument" and spec is not None and getattr(spec, "instrument", None) == block.name:
+            keep = np.ones(len(labs), bool)
+        elif kind == "line" and block.kind == "points":
+            a = np.array([fc.x[rows[0]], fc.y[rows[0]]])
+            b = np.array([fc.x[rows[-1]], fc.y[rows[-1]]])
+            d = b - a
+            t = np.clip((xy - a) @ d / max(d @ d, 1e-300), 0.0, 1.0)
+            off = np.hypot(*(xy - (a + t[:, None] * d)).T)
+            keep = (off <= 1e-6 * max(np.sqrt(d @ d), 1.0)) & np.array([lab.component == fc.quantity[rows[0]]
+                                                                        for lab in labs])
+        if keep is None or not keep.any():
+            continue
+        idx = np.arange(sl.start, sl.stop)[keep]
+        out.append((block.name, block.stage, xy[keep, 0], xy[keep, 1], res.data.measured[idx], sigma[idx]))
+    return out
+
+
+def _readings(ax, fc, rows, read, vertical: bool, label: str) -> None:
+    """The readings so far with ±2σ, at the forecast's positions (depth, x or distance along)."""
+    f, _ = _scale(fc.unit[rows[0]])
+    for k, (inst, stage, x, y, meas, sg) in enumerate(read):
+        if label == DEPTH or label.startswith("depth"):
+            pos = -y
+        elif label.startswith(("offset", "horizontal")):
+            pos = x
+        else:  # distance from the forecast's first row (along the line or from the reference end)
+            near = [int(np.argmin(np.hypot(fc.x[rows] - xi, fc.y[rows] - yi))) for xi, yi in zip(x, y)]
+            pos = fc.position[rows][near]
+        c = READ_COLOURS[k % len(READ_COLOURS)]
+        err = 2 * f * sg
+        kw = {"xerr": err} if vertical else {"yerr": err}
+        v = f * meas
+        ax.errorbar(*((v, pos) if vertical else (pos, v)), **kw, ls="none", marker="x", ms=7, mew=1.8, color=c,
+                    capsize=3, elinewidth=1.0, zorder=5, label=f"{inst} read after stage '{stage}' (± 2σ)")
+
+
+def forecast_figure(fc, name: str, res=None) -> Figure:
+    """The forecast `name` with its bands; `res`: the identification it comes from, whose readings so
+    far are drawn with it where they are of the same thing (None: the forecast alone)."""
     rows = fc.rows(name)
     kind, stage = fc.kind[rows[0]], fc.stage[rows[0]]
     quantities = list(dict.fromkeys(fc.quantity[i] for i in rows))
@@ -71,24 +167,39 @@ def forecast_figure(fc, name: str) -> Figure:
         fig = Figure(figsize=(6.4, 2.6 * len(quantities)))
         axes = fig.subplots(len(quantities), 1, sharex=True, squeeze=False)[:, 0]
         for ax, q in zip(axes, quantities):
-            _profile(ax, fc, np.array([i for i in rows if fc.quantity[i] == q]), vertical=False)
+            r = np.array([i for i in rows if fc.quantity[i] == q])
+            _profile(ax, fc, r, fc.position[r], fc.position_label[r[0]], vertical=False)
         axes[-1].set_xlabel("angle from the crown [°]")
         for ax in axes[:-1]:
             ax.set_xlabel("")
+        read = []
     else:
-        vertical = fc.position_label[rows[0]].startswith("depth")
-        fig = Figure(figsize=(4.6, 5.2) if vertical else (6.4, 3.8))
+        pos, label, vertical = layout(fc, rows)
+        fig = new_figure(5.2, 6.4) if vertical else Figure(figsize=(6.4, 3.8))
         ax = fig.subplots()
-        if kind in ("points", "convergence"):
+        spread = label == DEPTH or label.startswith(("offset", "horizontal"))
+        if kind == "convergence" or (kind == "points" and not spread):
             _points(ax, fc, rows)
+            read = []
+        elif kind == "points" or (kind == "instrument" and fc.position_label[rows[0]] == "reading"):
+            _spread_points(ax, fc, rows, pos, label, vertical)
+            read = readings_so_far(res, fc, name)
         else:
-            _profile(ax, fc, rows, vertical)
+            _profile(ax, fc, rows, pos, label, vertical)
+            read = readings_so_far(res, fc, name)
+        if read:
+            _readings(ax, fc, rows, read, vertical, label)
         axes = [ax]
-    axes[0].legend(loc="best", frameon=False)
-    fig.suptitle(f"Forecast '{name}' after stage '{stage}' with its 95 % band")
+    if kind != "lining" and vertical:  # below the panel: a profile fills its frame
+        fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", frameon=False, fontsize=8,
+                   ncols=2)
+    else:
+        axes[0].legend(loc="best", frameon=False, fontsize=8)
+    sub = ("\nwith the readings so far" if read else "")
+    fig.suptitle(f"Forecast '{name}' after stage '{stage}' with its 95 % band{sub}")
     return fig
 
 
-def forecast_figures(fc) -> dict:
-    """{'forecast_<name>': Figure} for every forecast."""
-    return {f"forecast_{name}": forecast_figure(fc, name) for name in fc.names}
+def forecast_figures(fc, res=None) -> dict:
+    """{'forecast_<name>': Figure} for every forecast (with the readings so far from `res`)."""
+    return {f"forecast_{name}": forecast_figure(fc, name, res) for name in fc.names}

@@ -23,7 +23,7 @@ def lining_figure(forces, res=None) -> Figure:
     grid = fig.add_gridspec(3, 2, width_ratios=[1.0, 1.45])
     axR = fig.add_subplot(grid[:, 0])
     axN, axM, axV = (fig.add_subplot(grid[i, 1]) for i in range(3))
-    ang, arc = forces.angle, forces.arc
+    ang = forces.angle
     last = len(forces.stages) - 1
     for k, stage in enumerate(forces.stages):
         c = STAGE_COLOURS[k % len(STAGE_COLOURS)]

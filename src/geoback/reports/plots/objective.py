@@ -20,7 +20,7 @@ def objective_contours_figure(res, exploration) -> Figure:
     """J over the two most correlated parameters with both iteration paths (paper Fig. 2)."""
     slc = exploration.slice
     params, f, rel = res.parameters, res.fit, res.reliability
-    fig = new_figure(7.6, 6.0)
+    fig = new_figure(7.6, 6.8)
     ax = fig.add_subplot()
     paths = _paths(res, exploration)
     if slc.j is None:
@@ -30,7 +30,6 @@ def objective_contours_figure(res, exploration) -> Figure:
     fi, _ = display(params.names[i], params.units[i], p_hat[i])
     fj, _ = display(params.names[j], params.units[j], p_hat[j])
     a, b, Jg = slc.a, slc.b, slc.J
-    ng = len(a)
     A, B = np.meshgrid(a * fi, b * fj)
     good = np.isfinite(Jg) & (Jg > 0)
     jmin_grid = np.nanmin(np.where(good, Jg, np.nan))
@@ -41,7 +40,8 @@ def objective_contours_figure(res, exploration) -> Figure:
     cs = ax.contourf(A, B, Jc, levels=levels, norm=LogNorm(low, jmax), cmap="viridis_r", extend="neither")
     ax.contour(A, B, Jc, levels=levels, colors="k", linewidths=0.45, alpha=0.45)
     cb = fig.colorbar(cs, ax=ax, shrink=0.92, pad=0.02)
-    cb.set_label("objective J = ‖L⁻¹(x* − x(p))‖²  [-]")
+    cb.set_label("objective J = ‖L⁻¹(x* − x(p))‖²  [-]" if not slc.linearised else
+                 "objective of the linearised model J* + Δpᵀ A′ᵀA′ Δp  [-]")
     cb.ax.yaxis.set_major_locator(matplotlib.ticker.LogLocator(numticks=8))
 
     # iteration paths (accepted steps; rejected trial points as small crosses)
@@ -71,14 +71,25 @@ def objective_contours_figure(res, exploration) -> Figure:
     ax.set_ylabel(axis_label(params, j, p_hat[j]))
     held = [nm for k, nm in enumerate(params.names) if k not in (i, j)]
     lines = [f"Objective function J({params.names[i]}, {params.names[j]}) and iteration paths",
-             f"{res.weighting} weighting, correlation {rel.correlation[i, j]:+.2f}, grid {ng}×{ng}"
-             + (" (capped: every grid point refactorises the stiffness)" if slc.refactorises else "")]
+             f"{res.weighting} weighting, correlation {rel.correlation[i, j]:+.2f}", *map_words(slc)]
     if held:
         lines.append(f"slice with {', '.join(held)} held at the estimate; paths projected onto it")
     ax.set_title("\n".join(lines), fontsize=10)
     handles, _ = ax.get_legend_handles_labels()
-    ax.legend(handles=handles + svd_handles, loc="lower right", framealpha=0.9)
+    ax.legend(handles=handles + svd_handles, loc="upper center", bbox_to_anchor=(0.5, -0.09), ncols=2,
+              frameon=False)  # below the map, never over it
     return fig
+
+
+def map_words(slc) -> list[str]:
+    """What the map shows, in the figure's words (title lines)."""
+    if not slc.linearised:
+        return [f"J computed by the model on a {len(slc.a)}×{len(slc.b)} grid" if slc.b is not None else
+                "J computed by the model"]
+    if slc.requested:
+        return ["J of the model linearised at the estimate (as asked)"]
+    return ["J of the model linearised at the estimate: the model itself would need a new solution at every",
+            "point of the map (geoback run --plots --objective-map model draws that)"]
 
 
 def _svd_arrows(ax, slc, p_hat, factors, ph) -> list:
@@ -120,7 +131,8 @@ def _svd_arrows(ax, slc, p_hat, factors, ph) -> list:
 def _objective_1d(fig, ax, res, slc, paths) -> Figure:
     params, f = res.parameters, res.fit
     fi, _ = display(params.names[0], params.units[0], f.p[0])
-    ax.semilogy(slc.a * fi, slc.J, color="0.3", lw=1.5, label="J")
+    ax.semilogy(slc.a * fi, slc.J, color="0.3", lw=1.5,
+                label="J" if not slc.linearised else "J of the model linearised at the estimate")
     for method, acc, _ in paths:
         st = METHOD_STYLE.get(method, METHOD_STYLE["lm"])
         ax.plot([h.p[0] * fi for h in acc], [max(h.J, 1e-300) for h in acc], color=st["color"], ls=st["ls"],
@@ -131,6 +143,6 @@ def _objective_1d(fig, ax, res, slc, paths) -> Figure:
             label="estimate p̂")
     ax.set_xlabel(axis_label(params, 0, f.p[0]))
     ax.set_ylabel("objective J [-]")
-    ax.set_title(f"Objective function J({params.names[0]}) and iteration paths")
+    ax.set_title("\n".join([f"Objective function J({params.names[0]}) and iteration paths", *map_words(slc)]))
     ax.legend()
     return fig
