@@ -328,9 +328,10 @@ def test_costly_objective_map_is_linearised_and_says_so(nu_case):
     fig = plots.convergence_figure(res, ex)
     assert "Gauss-Newton not run for comparison" in fig.get_suptitle()
     fig.clear()
-    from geoback.reports.report import report_text
+    from geoback.reports.report import report_text, summary
 
     assert "linearised at the estimate" in report_text(res, ex)
+    assert summary(res, ex)["exploration"]["objective_map"] == "linearised"
 
 
 def test_objective_map_from_the_model_on_request(nu_case):

@@ -75,6 +75,8 @@ def summary(res, exploration=None, readings=()) -> dict:
         out["forecasts"] = as_dict(res.forecasts)
     if exploration is not None:  # the work of the field file and figures, apart from the identification's
         out["exploration"] = {k: exploration.counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}
+        if getattr(exploration, "slice", None) is not None:  # the figures' objective map: the model's or linearised
+            out["exploration"]["objective_map"] = exploration.slice.source
         out["timings_s"]["exploration"] = round(exploration.seconds, 4)
     return out
 
