@@ -26,8 +26,6 @@ def several_stages(labels) -> bool:
 
 def summary(res, exploration=None) -> dict:
     f, rel, params = res.fit, res.reliability, res.parameters
-    lo, hi = rel.interval95()
-    lo, hi = res.intervals95()
     out = {
         "case": res.name,
         "case_hash": res.case_hash,
@@ -39,9 +37,7 @@ def summary(res, exploration=None) -> dict:
         "weighting": res.weighting,
         "iterations": f.iterations,
         "parameters": {n: {"unit": params.units[i], "initial": params.initial[i], "estimate": f.p[i],
-                           "std": rel.std[i], "ci95": [lo[i], hi[i]],
-                           "ci95_method": "profile likelihood" if n in res.profiled else "linearised",
-                           "ci95_open": list(res.profiled[n][2:]) if n in res.profiled else [False, False],
+                           "std": rel.std[i], **res.interval(n).as_dict(),  # ci95 (None: ci95_reason), method, open
                            "at_bound": bool(f.at_bound[i]),
                            **(res.prior_posterior.as_dict(i) if res.prior_posterior is not None else {})}
                        for i, n in enumerate(params.names)},
@@ -95,16 +91,16 @@ def report_text(res, exploration=None) -> str:
               chi2_line(rel),
               f"- AIC = {rel.aic:.6g}, BIC = {rel.bic:.6g}, condition number = {rel.condition:.3g}", "",
               "| parameter | unit | initial | estimate | std | 95 % interval |", "|---|---|---|---|---|---|"]
-    lo, hi = res.intervals95()
     for i, n in enumerate(params.names):
         bound = " (at bound)" if f.at_bound[i] else ""
-        how, (lo_open, hi_open) = "", (False, False)
-        if n in res.profiled:
-            how, (lo_open, hi_open) = " (profile likelihood)", res.profiled[n][2:]
-        ends = (f"≤ its bound {lo[i]:.6g}" if lo_open else f"{lo[i]:.6g}",
-                f"≥ its bound {hi[i]:.6g}" if hi_open else f"{hi[i]:.6g}")
+        iv = res.interval(n)
+        how = "" if iv.method == "linearised" else f" ({iv.method})"
+        lo_open, hi_open = iv.open
+        ends = (f"≤ its bound {iv.low:.6g}" if lo_open else f"{iv.low:.6g}",
+                f"≥ its bound {iv.high:.6g}" if hi_open else f"{iv.high:.6g}")
+        cell = f"[{ends[0]}, {ends[1]}]{how}" if iv.exists else f"none: {iv.reason}"
         lines.append(f"| {n} | {params.units[i]} | {params.initial[i]:.6g} | {f.p[i]:.6g}{bound} | "
-                     f"{rel.std[i]:.3g}{_cv(f.p[i], rel.std[i])} | [{ends[0]}, {ends[1]}]{how} |")
+                     f"{rel.std[i]:.3g}{_cv(f.p[i], rel.std[i])} | {cell} |")
     lines += prior_posterior_lines(res)
     if rel.parameter_dof is not None:
         lines += ["", "The error scales are estimated: the intervals are Student t on "
@@ -221,7 +217,7 @@ def _write_run(res, out: Path, exploration, plots: bool) -> None:
               ["name", "unit", "initial", "estimate", "std", "ci95_low", "ci95_high", "ci95_method", "at_bound",
                "prior_std", "prior_source", "posterior_std", "identifiability"],
               [[n, params.units[i], params.initial[i], f.p[i], rel.std[i], lo[i], hi[i],
-                "profile likelihood" if n in res.profiled else "linearised", bool(f.at_bound[i])]
+                res.interval(n).method, bool(f.at_bound[i])]
                + ([pp.prior_std[i], pp.prior_source[i], pp.posterior_std[i], pp.identifiability[i]] if pp is not None
                   else ["", "", "", ""])
                for i, n in enumerate(names)])
