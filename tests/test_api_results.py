@@ -149,7 +149,7 @@ def test_a_release_above_1_is_refused_wherever_it_comes_from(tmp_path):
     from measure import run_cli
 
     run = run_cli(["simulate", STAGED, "--set", "beta[advance]=1.5", "--out", tmp_path / "sim"], tmp_path)
-    assert run.returncode == 2 and "beta[advance]: expected a value within 0.001 to 1" in run.stderr, run.stderr
+    assert run.returncode == 2 and "beta[advance]: expected a value within 0.001 to 1, found 1.5" in run.stderr, run.stderr
     path = _staged_with_beta_bounds(tmp_path, [0.05, 1.5])
     with pytest.raises(GeobackError, match=r"parameters\[2\]\.bounds: expected bounds of beta\[advance\] within "
                                            r"its allowed range \(0.001 to 1\), found \[0.05, 1.5\]"):

@@ -262,6 +262,7 @@ def resolve_values(simulation: Simulation, assignments: Mapping[str, object]) ->
                                f"({exc})") from None
         lim = parameter_limits(simulation, name, {**base, **out})
         if not lim.contains(value):
-            raise GeobackError(f"{raw}: expected a value within {lim.lo:g} to {lim.hi:g} {unit}, found {value:g}")
+            raise GeobackError(f"{raw}: expected a value within {lim.lo:g} to {lim.hi:g}"
+                               f"{'' if unit in ('-', '') else ' ' + unit}, found {value:g}")
         out[name] = value
     return out
