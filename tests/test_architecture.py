@@ -96,7 +96,7 @@ def test_every_room_is_a_package_with_a_docstring():
         doc = ast.get_docstring(ast.parse((SRC / room / "__init__.py").read_text()))
         assert doc and len(doc) > 40, room
     loose = sorted(p.name for p in SRC.glob("*.py"))
-    assert loose == ["__init__.py", "errors.py", "outputs.py"]  # the foundation, below every room
+    assert loose == ["__init__.py", "errors.py", "outputs.py", "units.py"]  # the foundation, below every room
 
 
 def test_public_api_visible_to_dir_and_tab_completion():

@@ -143,10 +143,25 @@ def test_two_effects_are_reported_from_the_final_joint_fit(tmp_path):
     write_diagnosis(d, tmp_path, plots=False)
     data = json.loads((tmp_path / "diagnosis.json").read_text())
     md = (tmp_path / "diagnosis.md").read_text()
+    from geoback.diagnosis.units import shown
+
+    units = dict(zip(d.final.parameters.names, d.final.parameters.units))
     for s, item in zip(d.accepted, data["missing"]):
         for n in s.hypothesis.names:
             assert item["estimates"][n]["estimate"] == final[n]
-            assert f"{n} = {final[n]:.4g}" in text and f"{n} = {final[n]:.4g}" in md
+            # (issue 18.4: shown in engineering units, B in mm and bias in mrad, no longer in m and rad)
+            number = f"{n} = {shown(n, units[n], final[n]).split(' ')[0]}"
+            assert number in text and number in md
+    # the amended case (issue 18.4) holds the readings diagnosed (given in memory here) and both
+    # instrument errors as parameters: `run` on it gives the final joint fit again
+    import geoback
+
+    amended = tmp_path / "amended.yaml"
+    assert "given in memory" in amended.read_text()
+    res = geoback.run_case(geoback.load_case(amended), tmp_path / "run")
+    assert {"B[I1]", "bias[I2]"} <= set(res.keys())
+    for e in res:
+        assert e.value == pytest.approx(final[e.name], rel=1e-6), e.name
     truth = {"B[I1]": 0.004, "bias[I2]": 4e-4}  # (one draw: within 3 sigma, not necessarily inside the 95 %)
     for n, t in truth.items():
         j = d.final.parameters.names.index(n)

@@ -78,3 +78,24 @@ def test_null_cases_are_not_called_yielding(name):
     d = diagnose(load_case(CONCEALED / f"{name}.yaml"))
     assert d.adequate_before and "yielding" not in [s.hypothesis.kind for s in d.accepted]
     assert not any(s.hypothesis.kind == "yielding" for r in d.rounds for s in r.ranking)  # not even refitted
+
+
+def test_amended_case_makes_the_layer_yield_and_reproduces_the_fit(yielding, tmp_path):
+    """amended.yaml (issue 18.4): the clay made mohr-coulomb with the assumed phi' and psi and c' at
+    its estimate, c[clay] a parameter; `run` on it gives the final joint fit again."""
+    import yaml
+
+    import geoback
+    from geoback.reports.diagnosis_report import write_diagnosis
+
+    d = yielding
+    write_diagnosis(d, tmp_path / "d", plots=False)
+    path = tmp_path / "d" / "amended.yaml"
+    data = yaml.safe_load(path.read_text())
+    (clay,) = data["ground"]["layers"]
+    final = dict(zip(d.final.parameters.names, d.final_fit.p))
+    assert clay["model"] == "mohr-coulomb" and clay["phi"] == PHI and clay["c"] == pytest.approx(final["c[clay]"])
+    assert [p["name"] for p in data["parameters"]] == list(d.final.parameters.names)
+    res = geoback.run_case(geoback.load_case(path), tmp_path / "run")
+    for e in res:
+        assert e.value == pytest.approx(final[e.name], rel=1e-6), e.name

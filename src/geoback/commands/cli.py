@@ -297,7 +297,8 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
         typer.echo(diagnosis_text(d))
     else:
         typer.echo(verdict(d))
-    typer.echo(f"-> {folder}/diagnosis.md, diagnosis.json", err=True)
+    amended = ", amended.yaml (the case with the accepted extensions: `geoback run` it to go on)" if d.accepted else ""
+    typer.echo(f"-> {folder}/diagnosis.md, diagnosis.json{amended}", err=True)
 
 
 EXIT_CODES = """Exit codes: 0 converged (warnings, if any, are printed); 1 the fit did not converge or did not
@@ -335,7 +336,7 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
     names: list[str] = []
     units: list[str] = []
     talk = not quiet and not as_json
-    from geoback.reports.units import number, shown
+    from geoback.units import number, shown
 
     def progress(it):
         if talk:
@@ -388,9 +389,9 @@ def design(case: Path = typer.Argument(..., help="case file (YAML) with a design
     """Rank candidate instruments by how much they would narrow the forecasts (or the parameters)."""
     out = _check_out(out)
     loaded = _load(case, allow_large)
-    if loaded.case.design is None:
-        raise loaded.error(("design",), "expected a design section with candidate instruments (see `geoback "
-                                        "init`), found none")
+    from geoback.worth.design import require_design, require_estimate
+
+    require_design(loaded)
     folder = _out_dir(loaded, out)
     from geoback.worth.design import design as rank
     from geoback.reports.design_report import design_text, write_design
@@ -403,9 +404,7 @@ def design(case: Path = typer.Argument(..., help="case file (YAML) with a design
         require_readings(loaded)  # names the instruments without readings
     _say("identifying the parameters at which the candidates are compared")
     res = identify(analysis)
-    if res.fit.status != "converged" or not res.fit.moved:
-        raise GeobackError(f"the identification did not converge ({res.status}): candidates are compared at the "
-                           "estimate; run `geoback run` and fix the case first")
+    require_estimate(res)
     d = rank(analysis, res, progress=_say)
     if separate:
         from geoback.worth.design import separate as discriminate

@@ -128,7 +128,8 @@ def boundary_interval(rnd: Round, say) -> None:
     prof = acc.profile.interval()
     best = prof.best
     if best is not acc:
-        best.profile, best.p_score = prof, acc.p_score
+        best.profile = prof
+        best.tested_as(acc)
         judge(best)
         rnd.ranking[rnd.ranking.index(acc)] = best
         rnd.accepted, rnd.tentative = best, not best.determined

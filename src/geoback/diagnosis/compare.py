@@ -21,6 +21,7 @@ import numpy as np
 
 from geoback.case.covariance import NotPositiveDefinite
 from geoback.inference.misfit import whiten_block
+from geoback.units import size_text
 
 EQUAL_AIC = 2.0  # within this many AIC units two hypotheses explain the readings about equally
 POWER = 0.8
@@ -137,13 +138,14 @@ def detectable_lambda(k: int, level: float, power: float = POWER) -> float:
 
 
 SHORT = {"stiffness-gradient": "a modulus gradient", "layer-boundary": "a stratum with another modulus",
+         "lining-stiffness": "a change of the lining's modulus", "release-before-lining": "another release before the lining",
          "anisotropy": "anisotropy", "K0-gradient": "a K0 gradient", "stress-release": "a partial stress release",
          "integration-constant": "a reference-end movement", "bias-shift": "a bias shift", "depth-offset": "a depth offset"}
 ABSURD = 10.0  # a detectable size this many times the parameter's usual range is "not detectable"
 
 
 def detectable_text(ranking, level: float = None) -> str:
-    """'a modulus gradient of ±62 kPa/m ('clay'); a bias shift of ±0.26 mm/m (I1, I2); ...': the size
+    """'a modulus gradient of ±0.062 MPa/m ('clay'); a bias shift of ±0.26 mrad (I1, I2); ...': the size
     of effect each kind of hypothesis in the library would have caught with probability POWER,
     one parameter at a time (a group of depths: the smallest and largest over its depths)."""
     by_kind: dict[str, dict[str, list[str]]] = {}
@@ -193,15 +195,20 @@ def _size(name: str, v: float, s) -> str:
              "D": CONSTANT_LENGTH, "C": CONSTANT_ANGLE}.get(stem)
     if usual is not None and v > ABSURD * (usual.plausible[1] - usual.plausible[0]):
         return ""
-    if stem == "zoff":
-        return f"±{v:.2g} m"
-    if stem in ("B", "A", "D"):
-        return f"±{v * 1e3:.2g} mm"
-    if stem == "bias":
-        return f"±{v * 1e3:.2g} mm/m"
     if stem in ("n", "m", "beta"):
         return f"{stem} = {p.initial:g} ± {v:.2g}" if v < ABSURD * max(abs(p.initial), 1.0) else ""
-    unit = {"Egrad": " kPa/m", "K0grad": " /m"}.get(stem, "")
-    if p.bounds and v > ABSURD * (p.bounds[1] - p.bounds[0]):
+    if usual is None and p.bounds and v > ABSURD * (p.bounds[1] - p.bounds[0]):
         return ""
-    return f"±{v:.2g}{unit}"
+    return size_text(name, unit_of(s, name), v)
+
+
+def unit_of(s, name: str) -> str:
+    """The SI unit of a hypothesis' parameter (its extended misfit's, else by the name's stem)."""
+    params = getattr(s.misfit, "parameters", None)
+    if params is not None and name in params.names:
+        return params.units[params.index(name)]
+    from geoback.inference.parameters import UNITS
+
+    stem = name.split("[")[0]
+    return UNITS.get(stem, {"E": "kPa", "Esplit": "kPa", "Egrad": "kPa/m", "K0grad": "1/m", "c": "kPa",
+                            "phi": "deg"}.get(stem, "-"))

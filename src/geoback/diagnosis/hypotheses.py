@@ -134,7 +134,7 @@ def _stress_release(ctx: Context) -> list[Hypothesis]:
         return []
     return [Hypothesis("stress-release", "stress-release", "partial stress release before support",
                        "Only a fraction beta of the initial stress on the tunnel wall was released by the excavation.",
-                       [_param("beta", 1.0, 0.05, 1.5)])]
+                       [_param("beta", 1.0, 0.05, 1.0)])]
 
 
 def _staged_plan(ctx: Context):

@@ -215,6 +215,7 @@ def _best_of_groups(scored: list[Scored]) -> list[Scored]:
         if g not in best or s.score > best[g].score:
             best[g] = s
     for g, s in best.items():
+        s.p_single, s.group_size = s.p_score, size[g]
         s.p_score = min(1.0, s.p_score * size[g])
     return sorted(best.values(), key=lambda s: (s.p_score, -s.score))
 
@@ -317,7 +318,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
                                 scales=cur_rel.error_scales, scale_threshold=scale_level))
             break
         hyps = [h for h in candidate_hypotheses(current, cur_fit.p) if _modelled(current, h)]
-        say(f"scoring {len(hyps)} hypotheses")
+        say(scoring_words(hyps))
         ranking = _best_of_groups(scored := score_hypotheses(current, cur_fit.p, hyps))
         testable = [s for s in ranking if s.collinear_with is None]
         unscored = yielding.screen(current, cur_fit.p)  # likelihood-ratio refits only (yielding.py)
@@ -329,7 +330,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         scales_ok = all(e.p_allowed >= scale_level for e in tested)
         adequate = chi2_ok and scales_ok and all(s.p_score >= threshold for s in testable)
         rnd = Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, ranking, None, adequate, threshold,
-                    cur_rel.error_scales, scale_level)
+                    cur_rel.error_scales, scale_level, hypotheses=len(hyps), screened=len(unscored))
         rounds.append(rnd)
         if adequate or k == max_rounds:
             break
@@ -344,7 +345,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
                 except RuntimeError as exc:
                     say(f"  {exc}")
                     continue
-                winner.p_score = s.p_score
+                winner.tested_as(s)
                 ranking[ranking.index(s)] = winner
                 judge(winner)
                 continue
@@ -375,12 +376,29 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
                 final_profiles[s.hypothesis.key] = prof
                 best = prof.best
                 current, cur_fit = best.misfit, best.refit
+    if accepted:  # the refits stop at REFIT_ITERATIONS or when J stalls: the final model fitted as `run` fits it
+        say("final joint fit")
+        cur_fit = fit(current, settings, method=method, p0=cur_fit.p)
     say("final joint fit: intervals")
-    final = conclude(current, cur_fit, current.simulation.loaded.case, analysis.loaded.digest(), {}, {},
-                     settings=settings)
+    extended = current.simulation.loaded  # the case with the accepted extensions (a split layer) if any
+    final = conclude(current, cur_fit, extended.case, extended.digest(), {}, {}, settings=settings)
     intervals = _open_intervals(final, current, settings, [n for s in accepted for n in s.hypothesis.names])
     return Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
-                     time.perf_counter() - t_start, intervals)
+                     time.perf_counter() - t_start, intervals, analysis.loaded, method)
+
+
+def scoring_words(hyps: list[Hypothesis]) -> str:
+    """The progress line of a round's score tests, saying what is counted: 'scoring 37 hypotheses
+    in 12 tests (the 26 depths of a layer boundary in 'clay' are one test)'."""
+    sizes: dict[str, int] = {}
+    for h in hyps:
+        sizes[h.group or h.key] = sizes.get(h.group or h.key, 0) + 1
+    groups = [(g, n) for g, n in sizes.items() if n > 1]
+    if not groups:
+        return f"scoring {len(hyps)} hypotheses"
+    inner = "; ".join(f"the {n} depths of a layer boundary in '{g.split('[', 1)[1][:-1]}' are one test"
+                      for g, n in groups)
+    return f"scoring {len(hyps)} hypotheses in {len(sizes)} tests ({inner})"
 
 
 def _open_intervals(final: Identification, misfit: Misfit, settings: Settings, names: list[str]) -> dict:

@@ -46,10 +46,18 @@ class Scored:
     caveats: list = field(default_factory=list)  # the refit's caveats on its extra parameters
     profile: DepthProfile | None = None  # a layer boundary's depth profile
     weight: float = float("nan")  # Akaike weight in its round
+    group_size: int = 1  # hypotheses of its group (a layer boundary's depths): p_score is Bonferroni over them
+    p_single: float = float("nan")  # the score test's p of this one hypothesis (before the group's Bonferroni)
 
     @property
     def settled(self) -> bool:
         return self.refit is not None and settled(self.refit)
+
+    def tested_as(self, other: "Scored") -> "Scored":
+        """This refit takes the score test of `other` (the row of its group it replaces): p, the
+        group's size and the single depth's p."""
+        self.p_score, self.group_size, self.p_single = other.p_score, other.group_size, other.p_single
+        return self
 
 
 @dataclass
@@ -69,6 +77,35 @@ class Round:
     rival: Scored | None = None  # a hypothesis within 2 AIC of the accepted one
     separation: object = None  # compare.Separation of the accepted one and its rival
     tentative: bool = False  # accepted although an extra parameter is not determined
+    hypotheses: int = 0  # hypotheses scored (every depth of a layer boundary counted)
+    screened: int = 0  # hypotheses no score test can rank, refitted instead (yielding): in the family too
+
+    @property
+    def tests(self) -> int:
+        """Score tests in the Bonferroni family: one per row of the ranking that can be tested (a
+        layer boundary's depths are one test, Bonferroni within it)."""
+        return sum(1 for s in self.ranking if s.collinear_with is None and s.hypothesis.kind != "yielding")
+
+    @property
+    def family(self) -> int:
+        """The Bonferroni family: the score tests and the screened hypotheses (threshold = alpha / family)."""
+        return self.tests + self.screened
+
+    def family_words(self, alpha: float) -> str:
+        """What the level counts: '0.05 / 15: 14 score tests (one per row; the 25 depths of a layer
+        boundary in 'clay' one test) and 1 hypothesis screened by refit (yielding)'."""
+        groups = [s for s in self.ranking if s.group_size > 1]
+        inner = [f"the {s.group_size} depths of a layer boundary in '{s.hypothesis.group.split('[', 1)[1][:-1]}' "
+                 f"are one test" for s in groups]
+        untested = sum(1 for s in self.ranking if s.collinear_with is not None)
+        if untested:
+            inner.append(f"{untested} row{'s are' if untested > 1 else ' is'} no test: its effect is that of the "
+                         f"fitted parameters")
+        text = f"{alpha:g} / {self.family}: {self.tests} score test{'s' if self.tests != 1 else ''} (one per row"
+        text += "".join(f"; {w}" for w in inner) + ")"
+        if self.screened:
+            text += f" and {self.screened} hypothesis screened and refitted instead (yielding)"
+        return text
 
 
 NO_ADDITION = "(no addition)"
@@ -87,6 +124,8 @@ class Diagnosis:
     seconds: float = float("nan")
     final_intervals: dict = field(default_factory=dict)  # name -> (low, high, low open, high open): profile-
     # likelihood intervals of accepted parameters the final identification did not profile (at a bound)
+    loaded: object = None  # the LoadedCase diagnosed (for the amended case: its file, its readings files)
+    method: str = "lm"  # the estimation method of every fit
 
     @property
     def baseline_fit(self) -> Fit:
@@ -136,9 +175,14 @@ class Diagnosis:
 
     def open_ends(self, name: str) -> tuple[bool, bool]:
         """Whether the 95 % interval of an accepted parameter reaches a limit the readings do not
-        move it from (a profile-likelihood interval open at that end)."""
+        move it from (a profile-likelihood interval open at that end, or a limit the linearised
+        one was cut at)."""
         got = self.final_intervals.get(name) or self.final.profiled.get(name)
-        return (bool(got[2]), bool(got[3])) if got else (False, False)
+        if got:
+            return bool(got[2]), bool(got[3])
+        if name in self.final.parameters.names:
+            return tuple(map(bool, self.final.interval(name).open))
+        return False, False
 
     def depth_profile(self, s: Scored) -> DepthProfile | None:
         """The depth profile of an accepted boundary in the final model (or its round's)."""

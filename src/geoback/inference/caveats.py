@@ -17,6 +17,9 @@ and a sentence that says what was found and what to check. Codes:
 | `mesh-error` | the mesh's discretisation error on a reading above 0.3 of its sigma |
 | `error-scale` | an estimated error scale beyond what the case allows for it (its prior, or the other instruments) |
 | `forecast-nonlinear` | a forecast's linearised 95 % band and the range sampled through the model differ by more than 10 % |
+| `instrument-misfit` | one instrument (or error-scale group) whose stated σ is taken as exact drives the misfit: its readings alone ask for a scale far above the others' (F test), with its share of J, the signs of its residuals and whether its readings run opposite to the computed ones |
+
+Values are given in the unit the report's table uses for that parameter (its unit column).
 """
 from __future__ import annotations
 
@@ -39,8 +42,7 @@ class Caveat:
 
 
 def _value(v: float, unit: str) -> str:
-    if unit == "kPa" and abs(v) >= 1e3:
-        return f"{v / 1e3:.4g} MPa" if abs(v) < 1e6 else f"{v / 1e6:.4g} GPa"
+    """A value in the parameter's own unit: the unit of the report's table (E in kPa there, so here)."""
     return f"{v:.4g}" + ("" if unit in ("-", "") else f" {unit}")
 
 
@@ -87,7 +89,7 @@ def fit_caveats(fit, rel, params, limits, profiled: dict) -> list[Caveat]:
                                 f"{'its lower limit' if lo_open else _value(lo, unit)} to "
                                 f"{'its upper limit' if hi_open else _value(hi, unit)}")
                 out.append(Caveat("not-determined",
-                                  f"{name} is not determined by the readings ({_value(p, unit)} ± "
+                                  f"{name} is not determined by the readings ({p:.4g} ± "
                                   f"{_value(sd, unit)}{f', {100 * cv:.0f} %' if positive else ''}{interval}): no "
                                   f"instrument sees it enough; fix it at a value or give it a prior", name))
             elif positive and cv >= POORLY:
@@ -109,3 +111,62 @@ def status_words(fit, rel) -> str:
     if rel.dof > 0 and rel.p_value < ALPHA:
         return f"converged; model inadequate (p = {rel.p_value:.2g})"
     return "converged"
+
+
+def instrument_caveats(rel, data, computed, whiten=None, alpha: float = ALPHA) -> list[Caveat]:
+    """The instrument that drives the misfit, named (code `instrument-misfit`): among the error-scale
+    groups whose σ is taken as stated (each instrument is its own group unless the case groups
+    them), the one with the largest share of J at the stated σ's, when its readings are not
+    consistent with its stated σ (``ScaleEstimate.p_stated``) and ask for a scale above the pooled
+    scale of all the others by the F test of ``scale_estimates.others_p``
+    (Bonferroni over the groups) and by a factor 2 or more. Said with its share of J, its own error
+    scale (sqrt(J_g / c_g), c_g its readings less the parameters' share), the signs of its
+    residuals (a sign test) and the factor a that best matches its readings by the computed
+    values, x* ~ a x (whitened by its stated C_x with `whiten(block, values, covariance)`, the
+    seam's ``misfit.whiten_block``): a < 0, readings running opposite to the model, points to a
+    sign convention, a reference end or a swapped component. Costs no model run."""
+    from geoback.inference.scale_estimates import others_p
+
+    groups = [e for e in getattr(rel, "error_scales", ()) if np.isfinite(e.J) and e.dof > 0]
+    if len(groups) < 2 or data.measured is None:
+        return []
+    J_all = sum(e.J for e in groups)
+    c_all = sum(e.dof for e in groups)
+    top = max(groups, key=lambda e: e.J)
+    if top.estimated or J_all <= 0:  # an estimated scale has its own test (code error-scale)
+        return []
+    if not (top.readings_factor > 1 and np.isfinite(top.p_stated) and top.p_stated < alpha):
+        return []  # its readings are consistent with its stated sigma: nothing drives a misfit
+    ratio, p = others_p(top.J, top.dof, J_all - top.J, c_all - top.dof)
+    if not (np.isfinite(p) and p < alpha / len(groups) and ratio >= 2.0):
+        return []
+    rows = np.array([i for i, lab in enumerate(data.labels) if lab.instrument in top.instruments], np.int64)
+    measured, x = data.measured[rows], np.asarray(computed, float)[rows]
+    r = measured - x
+    who = top.name if len(top.instruments) == 1 else f"{top.name} ({', '.join(top.instruments)})"
+    text = (f"{who} drives the misfit: {100 * top.J / J_all:.0f} % of J from {len(rows)} of {data.m} readings; "
+            f"its readings alone ask for {top.readings_factor:.2g}× its stated σ ({100 * top.level:g} % "
+            f"[{top.low:.2g}, {top.high:.2g}]), {ratio:.2g}× the other instruments' (F test p = {p:.2g})")
+    negative, positive = int(np.sum(r < 0)), int(np.sum(r > 0))
+    if len(rows) >= 3 and min(negative, positive) == 0:
+        n = negative + positive
+        text += (f"; all {n} of its residuals (measured - computed) are {'negative' if negative else 'positive'} "
+                 f"(sign test p = {min(1.0, 2 * 0.5 ** n):.2g})")
+    a = float("nan")
+    if whiten is not None:
+        try:
+            xw, mw = [], []
+            for block, sl in data.block_rows():
+                if block.name in top.instruments:
+                    xw.append(whiten(block, np.asarray(computed, float)[sl], data.covariance[sl, sl]))
+                    mw.append(whiten(block, data.measured[sl], data.covariance[sl, sl]))
+            xw, mw = np.concatenate(xw), np.concatenate(mw)
+            a = float(xw @ mw / (xw @ xw)) if xw @ xw > 0 else float("nan")
+        except (np.linalg.LinAlgError, ValueError):
+            a = float("nan")
+    if np.isfinite(a) and a < 0:
+        text += (f"; its readings run opposite to the computed ones (best match x* = {a:.2g} × computed): check "
+                 f"its sign convention, its reference end and its units")
+    else:
+        text += "; check its readings (order, units, reference end) and its stated σ"
+    return [Caveat("instrument-misfit", text, None)]

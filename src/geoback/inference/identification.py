@@ -1,8 +1,10 @@
 """Identification of a case: prepare (mesh, simulation, misfit), fit, assess, return a frozen result.
 
     analysis = prepare(load_case("cases/tunnel-paper.yaml"))
-    result = identify(analysis)            # or identify(loaded): prepares it first
+    result = identify(analysis)            # or identify(loaded) or identify("case.yaml"): prepares it first
     result["E[clay]"].value, result["E[clay]"].std, result["E[clay]"].interval
+    for e in result: print(e.name, e.value, e.unit)      # the estimates, in the case's order
+    result.correlation("E[clay]", "K0"), result.to_dict()  # JSON-ready
     print(geoback.fit_report(result))
 
 The result holds numbers only (no model): figures and files read it, and what they need beyond
@@ -10,6 +12,8 @@ it (an objective slice, the field) comes from ``explore`` (explicit, counted sep
 """
 from __future__ import annotations
 
+import math
+import os
 import time
 from dataclasses import dataclass, field, replace
 from typing import Mapping
@@ -19,10 +23,10 @@ import numpy as np
 from geoback.case.loading import LoadedCase, stage_names
 from geoback.errors import GeobackError
 from geoback.inference.estimate import Fit, Settings, fit
-from geoback.inference.misfit import Data, Misfit
+from geoback.inference.misfit import Data, Misfit, whiten_block
 from geoback.inference.parameters import ParameterSet, parameter_limits, resolve
 from geoback.observation.readings import measured_values, survey_blocks
-from geoback.inference.caveats import fit_caveats, status_words
+from geoback.inference.caveats import fit_caveats, instrument_caveats, status_words
 from geoback.inference.reliability import Reliability, assess
 from geoback.inference.scales import groups_of
 from geoback.physics.factory import make_simulation
@@ -60,8 +64,42 @@ class Analysis:
         return self.values_at(self.parameters.initial)
 
     def predict(self, p, sensitivities: bool = False) -> Prediction:
-        """Computed readings at parameter values p and, if asked, A = dx/dp (eqns 29, 34-42)."""
+        """Computed readings at parameter values p (one per parameter, in ``parameters.names``'
+        order, each within its allowed range) and, if asked, A = dx/dp (eqns 29, 34-42)."""
+        p = self.checked(p, "predict")
         return self.simulation.predict(self.values_at(p), self.parameters.names, sensitivities)
+
+    def checked(self, p, what: str = "parameter values") -> np.ndarray:
+        """p as a vector of the analysis' parameters, each within its allowed range (``limits``: the
+        same ranges the case file and ``--set`` are checked against); GeobackError otherwise."""
+        p = self.parameters.vector(p, what)
+        values = self.values_at(p)
+        for i, name in enumerate(self.parameters.names):
+            lim = parameter_limits(self.simulation, name, values)
+            if lim is not None and not lim.contains(p[i]):
+                unit = self.parameters.units[i]
+                raise GeobackError(f"{what}: expected {name} within its allowed range ({lim.lo:g} to {lim.hi:g}"
+                                   f"{'' if unit in ('-', '') else ' ' + unit}), found {p[i]:g}")
+        return p
+
+    def check_identification(self, result: "Identification", what: str = "forecast") -> None:
+        """Refuse an identification of another case (or of other parameters than this analysis'
+        simulation knows): its estimate would be put into a model it was not fitted to."""
+        digest = self.loaded.digest()
+        theirs = getattr(result, "case_hash", None)
+        if theirs != digest:
+            other = getattr(getattr(result, "case", None), "name", "?")
+            raise GeobackError(f"{what}: expected an identification of case '{self.case.name}' (digest {digest}), "
+                               f"found one of case '{other}' (digest {theirs}): identify this analysis first "
+                               f"(geoback.identify(analysis))")
+        survey = self.simulation.survey
+        unknown = [n for n in result.parameters.names
+                   if not (n in self.parameters.names or n in survey.constant_names or n in survey.error_names
+                           or self.simulation.canonical(n) == n)]
+        if unknown:
+            raise GeobackError(f"{what}: the identification's parameters {', '.join(unknown)} are not quantities of "
+                               f"this analysis' model (was it identified on an extended model, e.g. by diagnose? "
+                               f"prepare that model's case, e.g. the diagnosis' amended.yaml)")
 
     def with_readings(self, measured: np.ndarray, weighting: str | None = None) -> "Analysis":
         """The same case (simulation and its factorisations shared) with other readings x*, in
@@ -75,13 +113,33 @@ class Analysis:
                                            weighting or self.case.fit.weighting, groups_of(self.case, blocks)))
 
 
+def loaded_case(case) -> LoadedCase:
+    """A case as the public functions accept it: a LoadedCase, or the path of a case file (str or
+    Path; loaded and checked here)."""
+    if isinstance(case, LoadedCase):
+        return case
+    if isinstance(case, (str, os.PathLike)):
+        from geoback.case.loading import load_case
+
+        return load_case(case)
+    raise GeobackError(f"expected a case: a case file's path (str or Path), a LoadedCase (geoback.load_case) or a "
+                       f"prepared Analysis (geoback.prepare), found {type(case).__name__}")
+
+
+def analysis_of(case) -> "Analysis":
+    """An Analysis from what a user has: a path, a LoadedCase (prepared here) or an Analysis."""
+    return case if isinstance(case, Analysis) else prepare(loaded_case(case))
+
+
 def prepare(loaded: LoadedCase, mesh=None, backend: str | None = None, parameters=None,
             values: Mapping | None = None, with_readings: bool = True, simulation: Simulation | None = None,
             weighting: str | None = None) -> Analysis:
-    """Mesh, assemble and read a case: the simulation, and the misfit of its readings.
+    """Mesh, assemble and read a case (a LoadedCase, or a case file's path): the simulation, and
+    the misfit of its readings.
 
     parameters: case Parameter models to identify instead of the case's; values: named values
     that replace the case's (e.g. an extension switched on); with_readings=False: no misfit."""
+    loaded = loaded_case(loaded)
     case = loaded.case
     if simulation is None:
         blocks, measured = survey_blocks(loaded, stage_names(case), read=with_readings)
@@ -127,8 +185,79 @@ def input_notices(case, simulation: Simulation) -> list:
 
 
 @dataclass(frozen=True)
+class Interval:
+    """A parameter's 95 % interval and how it was found: 'linearised' (eqn 55, p ± z std),
+    'linearised in ln p' (p exp(± z std / p): a positive quantity whose linearised interval would
+    cross its lower limit, or a parameter fitted as ln p), 'profile likelihood', or 'none' (low and
+    high nan; `reason` says why: the fit did not converge, the readings do not determine it). An
+    open end is a limit (a bound or the allowed range) the readings do not move the parameter from."""
+
+    low: float
+    high: float
+    method: str = "linearised"
+    open: tuple[bool, bool] = (False, False)
+    reason: str = ""
+
+    @property
+    def exists(self) -> bool:
+        return self.method != "none"
+
+    def as_dict(self) -> dict:
+        """JSON-ready: the ends (None where there is no interval), the method, open ends and why."""
+        ends = [float(self.low), float(self.high)] if self.exists else None
+        return {"ci95": ends, "ci95_method": self.method, "ci95_open": list(map(bool, self.open)),
+                **({"ci95_reason": self.reason} if self.reason else {})}
+
+
+def interval_records(fit: Fit, rel: Reliability, params: ParameterSet, limits, profiled: dict) -> tuple:
+    """Every parameter's ``Interval``: none where the fit did not converge (a linearised interval
+    about a point that is not the optimum means nothing) or the std is not finite; a positive
+    quantity (its allowed range starts at 0 or above: E, c', K0, nu) never gets an end below its
+    lower limit: its interval is linearised in ln p instead, and an end beyond the allowed range is
+    that limit, open (the readings do not bound it there)."""
+    if not fit.moved:
+        why = "the fit stopped without moving from the initial values: there is no estimate to put an interval on"
+        return tuple(Interval(math.nan, math.nan, "none", reason=why) for _ in params.names)
+    if fit.status != "converged":
+        why = (f"the fit did not converge ({fit.reason}): a linearised interval about a point that is not the "
+               f"optimum means nothing")
+        return tuple(Interval(math.nan, math.nan, "none", reason=why) for _ in params.names)
+    lo, hi = rel.interval95()
+    out = []
+    for i, name in enumerate(params.names):
+        if name in profiled:
+            a, b, a_open, b_open = profiled[name]
+            out.append(Interval(float(a), float(b), "profile likelihood", (bool(a_open), bool(b_open))))
+            continue
+        p, sd = float(fit.p[i]), float(rel.std[i])
+        if not np.isfinite(sd):
+            out.append(Interval(math.nan, math.nan, "none",
+                                reason="the readings do not determine it (its standard deviation is infinite)"))
+            continue
+        lim = limits[i]
+        a, b = float(lo[i]), float(hi[i])
+        method = "linearised in ln p" if params.log[i] else "linearised"
+        if lim is not None and lim.lo >= 0 and a < lim.lo and p > 0 and not params.log[i]:
+            f = math.exp(min((b - p) / p, 700.0))  # z std / p, as the linearised interval used
+            a, b, method = p / f, p * f, "linearised in ln p"
+        a_open = b_open = False
+        if lim is not None:
+            if a < lim.lo:
+                a, a_open = float(lim.lo), True
+            if b > lim.hi:
+                b, b_open = float(lim.hi), True
+        reason = ""
+        if a_open or b_open:
+            ends = " and ".join(w for w, o in (("below", a_open), ("above", b_open)) if o)
+            reason = f"the readings do not bound it {ends}: the interval ends at its allowed range there"
+        out.append(Interval(a, b, method, (a_open, b_open), reason))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
 class Estimate:
-    """One identified parameter: value, standard deviation and 95 % interval (eqn 55)."""
+    """One identified parameter: value, standard deviation and 95 % interval (eqn 55; how it was
+    found in `method`, 'none' with the `reason` where there is none: low and high are then nan)."""
 
     name: str
     unit: str
@@ -138,16 +267,36 @@ class Estimate:
     low: float
     high: float
     at_bound: bool
+    method: str = "linearised"
+    open: tuple[bool, bool] = (False, False)
+    reason: str = ""
 
     @property
-    def interval(self) -> tuple[float, float]:
-        return self.low, self.high
+    def interval(self) -> tuple[float, float] | None:
+        """(low, high), or None where there is no interval (``reason`` says why)."""
+        return None if self.method == "none" else (self.low, self.high)
+
+    def as_dict(self) -> dict:
+        """JSON-ready (nan as None)."""
+        return {"name": self.name, "unit": self.unit, "initial": _num(self.initial), "value": _num(self.value),
+                "std": _num(self.std), "interval": None if self.interval is None else [_num(self.low), _num(self.high)],
+                "interval_method": self.method, "interval_open": list(map(bool, self.open)),
+                "interval_reason": self.reason or None, "at_bound": bool(self.at_bound)}
 
     def __repr__(self) -> str:
         bound = ", at a bound" if self.at_bound else ""
         unit = f" {self.unit}" if self.unit not in ("-", "") else ""
+        if self.interval is None:
+            return f"{self.name} = {self.value:.6g} ± {self.std:.3g}{unit} (no 95 % interval: {self.reason}{bound})"
+        how = "" if self.method == "linearised" else f", {self.method}"
         return (f"{self.name} = {self.value:.6g} ± {self.std:.3g}{unit} "
-                f"(95 % [{self.low:.6g}, {self.high:.6g}]{bound})")
+                f"(95 % [{self.low:.6g}, {self.high:.6g}]{how}{bound})")
+
+
+def _num(v) -> float | None:
+    """A JSON-ready number: a float, None for nan and infinities."""
+    v = float(v)
+    return v if math.isfinite(v) else None
 
 
 @dataclass(frozen=True)
@@ -177,6 +326,7 @@ class Identification:
     mesh_error_included: bool = False  # its variance added to C_x before the final fit
     forecasts: object = None  # geoback.worth.forecast.Forecasts at the estimate, if the case asks for any
     prior_posterior: object = None  # geoback.inference.identifiability.PriorPosterior: what the readings add to a prior
+    intervals: tuple = ()  # an Interval per parameter: its 95 % interval, how it was found, or why there is none
 
     @property
     def status(self) -> str:
@@ -184,7 +334,11 @@ class Identification:
         return status_words(self.fit, self.reliability)
 
     def intervals95(self) -> tuple[np.ndarray, np.ndarray]:
-        """The 95 % interval of each parameter: profile likelihood where it was computed, else linearised."""
+        """The 95 % interval of each parameter (``interval``: profile likelihood where it was
+        computed, else linearised; nan where there is none, e.g. the fit did not converge)."""
+        if self.intervals:
+            return (np.array([iv.low for iv in self.intervals], float),
+                    np.array([iv.high for iv in self.intervals], float))
         lo, hi = self.reliability.interval95()
         lo, hi = lo.copy(), hi.copy()
         for name, (a, b, _, _) in self.profiled.items():
@@ -192,22 +346,78 @@ class Identification:
             lo[i], hi[i] = a, b
         return lo, hi
 
+    def interval(self, name: str) -> Interval:
+        """The 95 % interval of parameter `name` with how it was found (or why there is none)."""
+        i = self._index(name)
+        if self.intervals:
+            return self.intervals[i]
+        lo, hi = self.intervals95()
+        got = self.profiled.get(name)
+        return Interval(float(lo[i]), float(hi[i]), "profile likelihood" if got else "linearised",
+                        (bool(got[2]), bool(got[3])) if got else (False, False))
+
     @property
     def name(self) -> str:
         return self.case.name
 
     @property
     def estimates(self) -> list[Estimate]:
-        lo, hi = self.intervals95()
         p = self.parameters
-        return [Estimate(n, p.units[i], float(p.initial[i]), float(self.fit.p[i]), float(self.reliability.std[i]),
-                         float(lo[i]), float(hi[i]), bool(self.fit.at_bound[i])) for i, n in enumerate(p.names)]
+        out = []
+        for i, n in enumerate(p.names):
+            iv = self.interval(n)
+            out.append(Estimate(n, p.units[i], float(p.initial[i]), float(self.fit.p[i]), float(self.reliability.std[i]),
+                                float(iv.low), float(iv.high), bool(self.fit.at_bound[i]), iv.method, iv.open,
+                                iv.reason))
+        return out
+
+    def _index(self, name: str) -> int:
+        if name not in self.parameters.names:
+            raise KeyError(f"{name!r} is not an identified parameter ({', '.join(self.parameters.names)})")
+        return self.parameters.index(name)
 
     def __getitem__(self, name: str) -> Estimate:
-        for e in self.estimates:
-            if e.name == name:
-                return e
-        raise KeyError(f"{name!r} is not an identified parameter ({', '.join(self.parameters.names)})")
+        return self.estimates[self._index(name)]
+
+    def __iter__(self):
+        """The estimates, in the parameters' order (``for e in result: e.name, e.value, e.std``)."""
+        return iter(self.estimates)
+
+    def __len__(self) -> int:
+        return self.parameters.n
+
+    def __contains__(self, name) -> bool:
+        return name in self.parameters.names
+
+    def keys(self) -> list[str]:
+        """The parameters' names (``dict(zip(result.keys(), result))``)."""
+        return list(self.parameters.names)
+
+    def correlation(self, a: str, b: str) -> float:
+        """The correlation of the estimates of parameters `a` and `b` (from C_p, eqn 55)."""
+        i, j = sorted((self._index(a), self._index(b)))  # (the same number whichever way it is asked)
+        return float(self.reliability.correlation[i, j])
+
+    @property
+    def correlations(self) -> dict[tuple[str, str], float]:
+        """Every pair's correlation by names: {("E[clay]", "K0"): -0.12, ...} (each pair once, in order)."""
+        names, C = self.parameters.names, self.reliability.correlation
+        return {(a, names[j]): float(C[i, j]) for i, a in enumerate(names) for j in range(i + 1, len(names))}
+
+    def to_dict(self) -> dict:
+        """The result as plain JSON-ready data: status, the estimates (value, std, interval, unit),
+        chi-square, correlations by names and the caveats (nan and infinities as None)."""
+        rel, f = self.reliability, self.fit
+        return {
+            "case": self.name, "case_hash": self.case_hash, "status": self.status,
+            "converged": f.status == "converged", "stop_reason": f.reason, "method": f.method,
+            "iterations": int(f.iterations), "weighting": self.weighting,
+            "estimates": {e.name: e.as_dict() for e in self.estimates},
+            "chi2": _num(rel.chi2), "dof": _num(rel.dof), "reduced_chi2": _num(rel.reduced_chi2),
+            "p_value": _num(rel.p_value), "aic": _num(rel.aic), "bic": _num(rel.bic), "readings": int(self.data.m),
+            "correlations": {f"{a}, {b}": _num(c) for (a, b), c in self.correlations.items()},
+            "caveats": [c.as_dict() for c in self.caveats],
+        }
 
     @property
     def residual(self) -> np.ndarray:
@@ -226,13 +436,14 @@ def identify(case, method: str | None = None, progress=None, weighting: str | No
              mesh_error: str | None = "ignore") -> Identification:
     """Identify the case's parameters and assess the estimate (no files written).
 
-    case: a LoadedCase (prepared here) or an Analysis (its simulation and factorisations reused);
-    profile: 'auto' (profile-likelihood intervals where the linearised ones are unreliable), 'all'
+    case: a case file's path or a LoadedCase (prepared here), or an Analysis (its simulation and
+    factorisations reused); p0: where the fit starts instead of the case's initial values (one value
+    per parameter, each within its bounds: refused otherwise, as the case file's are); profile: 'auto' (profile-likelihood intervals where the linearised ones are unreliable), 'all'
     or 'none'; require_dof: refuse a case with no more readings (and priors) than parameters;
     mesh_error: 'check' or 'include' the discretisation error of the readings (geoback.inference.mesh_error;
     one more forward run on a finer mesh), 'ignore' it, or None for the case's fit.mesh_error."""
     t0 = time.perf_counter()
-    analysis = case if isinstance(case, Analysis) else prepare(case)
+    analysis = analysis_of(case)
     t1 = time.perf_counter()
     misfit = analysis.misfit
     if misfit is None:
@@ -247,6 +458,8 @@ def identify(case, method: str | None = None, progress=None, weighting: str | No
             + (f" and {priors} prior(s)" if priors else "") + f" for {misfit.n} parameters "
             f"({', '.join(misfit.parameters.names)}): the fit would have {misfit.m + priors - misfit.n} degrees of "
             "freedom and nothing could test it; add readings or priors, or identify fewer parameters")
+    if p0 is not None:
+        p0 = misfit.parameters.within_bounds(p0, "p0 (the initial values)")
     if weighting and weighting != misfit.weighting:
         misfit = misfit.with_weighting(weighting)
     sim = analysis.simulation
@@ -293,7 +506,8 @@ def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, se
     profiled = {}
     if settings is not None and profile != "none" and result.status == "converged" and result.moved:
         profiled = _profiles(misfit, settings, result, rel, limits, profile == "all")
-    caveats = tuple(notices) + tuple(fit_caveats(result, rel, misfit.parameters, limits, profiled))
+    caveats = (tuple(notices) + tuple(fit_caveats(result, rel, misfit.parameters, limits, profiled))
+               + tuple(instrument_caveats(rel, misfit.data, result.x, whiten_block)))
     from geoback.inference.identifiability import prior_posterior
 
     return Identification(
@@ -301,7 +515,8 @@ def conclude(misfit: Misfit, result: Fit, case, case_hash: str, counts: dict, se
         {k: counts.get(k, 0) for k in ("factorisations", "solves", "forward_runs")}, dict(seconds),
         getattr(sim, "dofs", 0), len(getattr(sim.mesh, "triangles", ())), getattr(sim, "solver", None),
         standardised, profiled, caveats,
-        prior_posterior=prior_posterior(rel.information, misfit.parameters, result.p, limits))
+        prior_posterior=prior_posterior(rel.information, misfit.parameters, result.p, limits),
+        intervals=interval_records(result, rel, misfit.parameters, limits, profiled))
 
 
 def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability, limits, every: bool) -> dict:

@@ -421,7 +421,7 @@ class Misfit:
         the current parameters start from `start` (default: their initial values)."""
         simulation = simulation or self.simulation
         values = {**{k: v for k, v in self.base_values.items()}, **(values or {})}
-        extra, base, _ = resolve(specs, simulation, values)
+        extra, base, _ = resolve(specs, simulation, values, clip_bounds=True)
         current = self.parameters if start is None else self.parameters.with_initial(start)
         params = current + extra
         constants = {n for n in params.names if is_constant(n)}

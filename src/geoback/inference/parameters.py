@@ -53,6 +53,33 @@ class ParameterSet:
                             cat([self.log, other.log]), cat([self.prior_mean, other.prior_mean]),
                             cat([self.prior_std, other.prior_std]), self.units + other.units)
 
+    def vector(self, p, what: str = "parameter values") -> np.ndarray:
+        """p as a vector of one finite number per parameter, in the set's order; refused (GeobackError
+        naming the expected parameters) otherwise."""
+        try:
+            v = np.asarray(p, dtype=float)
+        except (TypeError, ValueError):
+            raise GeobackError(f"{what}: expected {self.n} numbers ({', '.join(self.names)}), found {p!r}") from None
+        if v.ndim != 1 or len(v) != self.n:
+            raise GeobackError(f"{what}: expected {self.n} value{'s' if self.n != 1 else ''}, one for each of "
+                               f"{', '.join(self.names)} in that order, found {v.size if v.ndim else 1} "
+                               f"value{'s' if v.size != 1 else ''}")
+        if not np.all(np.isfinite(v)):
+            bad = [n for n, x in zip(self.names, v) if not np.isfinite(x)]
+            raise GeobackError(f"{what}: expected finite numbers, found {', '.join(bad)} not finite")
+        return v
+
+    def within_bounds(self, p, what: str = "initial values") -> np.ndarray:
+        """p (see ``vector``) with every value inside its bounds (the case's bounds cut to the allowed
+        range: what the fit may explore); refused otherwise, naming the parameter and its bounds."""
+        v = self.vector(p, what)
+        for i, name in enumerate(self.names):
+            if not self.lower[i] <= v[i] <= self.upper[i]:
+                unit = "" if self.units[i] in ("-", "") else f" {self.units[i]}"
+                raise GeobackError(f"{what}: expected {name} within its bounds [{self.lower[i]:g}, {self.upper[i]:g}]"
+                                   f"{unit} (the case's bounds within its allowed range), found {v[i]:g}")
+        return v
+
     def with_initial(self, p: np.ndarray) -> "ParameterSet":
         return ParameterSet(self.names, np.asarray(p, float).copy(), self.lower, self.upper, self.log,
                             self.prior_mean, self.prior_std, self.units)
@@ -85,13 +112,16 @@ def _instrument_term(name: str, simulation: Simulation) -> tuple[str, str] | Non
 
 
 def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = None,
-            error=None) -> tuple[ParameterSet, dict, list]:
+            error=None, clip_bounds: bool = False) -> tuple[ParameterSet, dict, list]:
     """Canonical ParameterSet of the `specs` (case Parameter models), the named values to start
     from (the simulation's quantities, `values`, extensions at their null values), and notices
     (``caveats.Caveat``) about unusual initial values.
 
-    Every parameter stays inside its allowed range (``limits``): an initial value, prior or bounds
-    outside it are refused, and the bounds the fit uses are the case's bounds within that range.
+    Every parameter stays inside its allowed range (``parameter_limits``, from
+    ``case.limits.QUANTITIES``: the one statement of the ranges, which ``resolve_values`` (``--set``)
+    applies too): an initial value, prior or bound outside it is refused (a release fraction
+    beta above 1, a modulus bound below 1 Pa). clip_bounds: the bounds are cut to that range
+    instead (the diagnosis' own hypotheses, whose search ranges are generic).
     error(i, message, field) builds the exception for spec i (e.g. located in the case file)."""
     from geoback.inference.caveats import Caveat
 
@@ -138,6 +168,9 @@ def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = No
             raise error(i, f"expected an initial value of {name} within its allowed range ({span}), found "
                            f"{p.initial:g}", "initial")
         b_lo, b_hi = (p.bounds if p.bounds else (-np.inf, np.inf))
+        if p.bounds and not clip_bounds and not (lim.contains(b_lo) and lim.contains(b_hi)):
+            raise error(i, f"expected bounds of {name} within its allowed range ({span}), found "
+                           f"[{p.bounds[0]:g}, {p.bounds[1]:g}]", "bounds")
         b_lo, b_hi = max(b_lo, lim.lo), min(b_hi, lim.hi)
         if not b_lo < b_hi:
             raise error(i, f"expected bounds overlapping the allowed range of {name} ({span}), found "
@@ -229,6 +262,7 @@ def resolve_values(simulation: Simulation, assignments: Mapping[str, object]) ->
                                f"({exc})") from None
         lim = parameter_limits(simulation, name, {**base, **out})
         if not lim.contains(value):
-            raise GeobackError(f"{raw}: expected a value within {lim.lo:g} to {lim.hi:g} {unit}, found {value:g}")
+            raise GeobackError(f"{raw}: expected a value within {lim.lo:g} to {lim.hi:g}"
+                               f"{'' if unit in ('-', '') else ' ' + unit}, found {value:g}")
         out[name] = value
     return out

@@ -1,4 +1,5 @@
-"""diagnosis.md / diagnosis.json: what was wrong, where, what was missing, how much better it fits."""
+"""diagnosis.md / diagnosis.json / amended.yaml: what was wrong, where, what was missing, how much
+better it fits, every parameter before and after, and the case amended to go on with."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,10 +8,11 @@ import numpy as np
 
 from geoback.outputs import write_atomic, write_json
 from geoback.reports.resultsets import result_set
-from geoback.reports.units import number, shown
-from geoback.diagnosis.compare import detectable_text
+from geoback.diagnosis.compare import detectable_text, unit_of
 from geoback.diagnosis.hypotheses import CAUSES
 from geoback.diagnosis.procedure import NO_ADDITION
+from geoback.units import display, interval_text, pm_text, value_text
+from geoback.diagnosis.amend import AMENDED, amended_text
 
 
 def _fit_line(chi2: float, dof: float, p: float) -> str:
@@ -37,36 +39,43 @@ def _scale_lines(rnd) -> list[str]:
 
 
 def _estimates(s) -> list[tuple[str, float, float, float, float]]:
-    """The hypothesis' parameters as refitted in its round (linearised intervals)."""
-    rel, f = s.reliability, s.refit
-    lo, hi = rel.interval95()
+    """The hypothesis' parameters as refitted in its round (linearised intervals, as `run` gives
+    them: none (nan) where the refit did not converge, in ln p where a positive quantity's would
+    cross its lower limit)."""
+    from geoback.inference.identification import interval_records
+    from geoback.inference.parameters import parameter_limits
+
+    rel, f, params = s.reliability, s.refit, s.misfit.parameters
+    values = s.misfit.values(f.p)
+    limits = [parameter_limits(s.misfit.simulation, n, values) for n in params.names]
+    records = interval_records(f, rel, params, limits, {})
     out = []
     for name in s.hypothesis.names:
         i = rel.names.index(name)
-        out.append((name, f.p[i], rel.std[i], lo[i], hi[i]))
+        out.append((name, f.p[i], rel.std[i], records[i].low, records[i].high))
     return out
 
 
-def _num(v: float) -> str:
-    return number(v, 4) if np.isfinite(v) else ("∞" if v > 0 else "-∞")
+def _unit(params, name: str) -> str:
+    return params.units[params.names.index(name)] if name in params.names else "-"
 
 
 def _accepted_words(d, s) -> str:
-    """One accepted hypothesis with its parameters from the final joint fit."""
+    """One accepted hypothesis with its parameters from the final joint fit, in engineering units."""
     params = d.final.parameters
-    case_unit = dict(zip(params.names, params.units))
 
-    def one(n, v, sd, lo, hi):  # in engineering units: a modulus in MPa (units.shown)
-        f, shown_unit = shown(case_unit.get(n, "-"), v)
-        u = "" if shown_unit in ("-", "") else f" {shown_unit}"
-        v, sd, lo, hi = v * f, sd * f, lo * f, hi * f
+    def one(n, v, sd, lo, hi):
+        unit = _unit(params, n)
         lo_open, hi_open = d.open_ends(n)
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            reason = d.final.interval(n).reason if n in params.names else ""
+            return f"{n} = {pm_text(n, unit, v, sd)} (no 95 % interval: {reason or 'not determined'})"
         if lo_open or hi_open:
-            ends = (f"from {'its lower limit' if lo_open else _num(lo)} to {'its upper limit' if hi_open else _num(hi)}"
-                    f" by profile likelihood, open where the readings do not bound it")
-            return f"{n} = {number(v, 4)}{u} (95 % {ends})"
+            ends = (f"from {'its lower limit' if lo_open else value_text(n, unit, lo)} to "
+                    f"{'its upper limit' if hi_open else value_text(n, unit, hi)}, open where the readings do not bound it")
+            return f"{n} = {value_text(n, unit, v)} (95 % {ends})"
         how = ", profile likelihood" if (n in d.final_intervals or n in d.final.profiled) else ""
-        return f"{n} = {number(v, 4)} ± {number(sd, 2)}{u} (95 % [{_num(lo)}, {_num(hi)}]{how})"
+        return f"{n} = {pm_text(n, unit, v, sd)} (95 % {interval_text(n, unit, lo, hi)}{how})"
 
     est = "; ".join(one(*e) for e in d.estimates(s))
     prof = d.depth_profile(s)
@@ -169,8 +178,8 @@ def diagnosis_text(d) -> str:
             scales = (", every estimated error scale is within what the case allows"
                       if any(e.estimated for e in rnd.scales) else "")
             flagged = [s for s in rnd.ranking if s.collinear_with is None and s.p_score < rnd.threshold]
-            tests = (f"no hypothesis' score test is significant at {rnd.threshold:.2g} (= {d.alpha:g} / number of "
-                     f"hypotheses)" if not flagged else
+            tests = (f"no hypothesis' score test is significant at {rnd.threshold:.2g} (= "
+                     f"{rnd.family_words(d.alpha)})" if not flagged else
                      f"the score test{'s' if len(flagged) > 1 else ''} of {', '.join(s.hypothesis.title for s in flagged)}"
                      f" {'are' if len(flagged) > 1 else 'is'} significant at {rnd.threshold:.2g}, but no refit "
                      f"improves the fit significantly (the score test is a linear approximation)")
@@ -178,7 +187,10 @@ def diagnosis_text(d) -> str:
         else:
             lines += ["- where the model and the readings differ:"] + [f"  - {m.text}" for m in rnd.mismatches[:4]]
         if rnd.ranking:
-            lines += ["", "| hypothesis | cause | score S | p (score) | ΔJ | p (LR) | AIC | Akaike weight | BIC | "
+            lines += ["", f"{rnd.hypotheses} hypotheses scored, one row per test (a layer boundary's depths are one "
+                          f"test: its row is the depth scoring highest, its p Bonferroni over the depths); level "
+                          f"{rnd.threshold:.2g} per test (= {rnd.family_words(d.alpha)}).",
+                      "", "| hypothesis | cause | score S | p (score) | ΔJ | p (LR) | AIC | Akaike weight | BIC | "
                           "estimate (this round) |",
                       "|---|---|---|---|---|---|---|---|---|---|"]
             for s in rnd.ranking:
@@ -189,15 +201,18 @@ def diagnosis_text(d) -> str:
                     continue
                 est = ""
                 if s.refit is not None:
-                    est = "; ".join(f"{n} = {v:.4g} ± {sd:.2g}" for n, v, sd, _, _ in _estimates(s))
+                    est = "; ".join(f"{n} = {pm_text(n, unit_of(s, n), v, sd)}" for n, v, sd, _, _ in _estimates(s))
                     if s.profile is not None:
                         est += f" ({s.profile.text()})"
                     elif s.hypothesis.extra_values:
-                        est += " (" + ", ".join(f"{k2} = {v:g}" for k2, v in s.hypothesis.extra_values.items()) + ")"
+                        est += " (" + ", ".join(f"{k2} = {v:g} m" for k2, v in s.hypothesis.extra_values.items()) + ")"
                     if not s.determined:
                         est += " **not determined**"
                 fmt = (lambda v: f"{v:.4g}" if np.isfinite(v) else "-")
-                lines.append(f"| {s.hypothesis.title} | {cause} | {fmt(s.score)} | {fmt(s.p_score)} | {fmt(s.dJ)} | "
+                p_cell = fmt(s.p_score)
+                if s.group_size > 1 and np.isfinite(s.p_single):
+                    p_cell += f" ({s.p_single:.2g} at this depth × {s.group_size} depths, Bonferroni)"
+                lines.append(f"| {s.hypothesis.title} | {cause} | {fmt(s.score)} | {p_cell} | {fmt(s.dJ)} | "
                              f"{fmt(s.p_lr)} | {fmt(s.aic)} | {fmt(s.weight) if np.isfinite(s.weight) else '-'} | "
                              f"{fmt(s.bic)} | {est} |")
             if rnd.weights:
@@ -225,8 +240,74 @@ def diagnosis_text(d) -> str:
                 where = "re-profiled in the final model" if s.hypothesis.key in d.final_profiles else "profiled"
                 lines.append(f"- boundary in '{prof.layer}' ({where}): {prof.text()}; J(z) at "
                              + ", ".join(f"{z:.3g} m: {J - prof.J_min:+.3g}" for z, J, _ in prof.points))
-        lines.append("")
+        lines += [""] + before_after_lines(d) + [""]
+        lines += [f"The amended case `{AMENDED}` (in this folder) has the accepted extensions in its model and starts "
+                  f"from these estimates: `geoback run {AMENDED}` reproduces the final joint fit, and forecasts and "
+                  f"`geoback design` go on from it.", ""]
     return "\n".join(lines) + "\n"
+
+
+def before_after(d) -> list[dict]:
+    """Every parameter of the final joint fit, before (the case's model fitted; None for a parameter
+    an accepted extension added, with its null value: where that extension is switched off) and
+    after (the final joint fit): estimate, std, 95 % interval (None with the reason where there is
+    none), in SI units (the unit given) and as shown."""
+    before, after = d.baseline, d.final
+    nulls = {q.name: q.initial for s in d.accepted for q in s.hypothesis.parameters}
+
+    def side(res, name):
+        if name not in res.parameters.names:
+            return None
+        e = res[name]
+        return {"estimate": e.value, "std": e.std, "ci95": None if e.interval is None else [e.low, e.high],
+                "ci95_method": e.method, "ci95_open": list(e.open), **({"ci95_reason": e.reason} if e.reason else {})}
+
+    accepted = {}  # an accepted parameter as the verdict gives it (profiles, a boundary's depth profiled out)
+    for s in d.accepted:
+        for n, v, sd, lo, hi in d.estimates(s):
+            prof = d.depth_profile(s) is not None
+            how = ("profile likelihood" + (", the depth profiled out" if prof else "")
+                   if (n in d.final_intervals or n in d.final.profiled or prof) else after.interval(n).method)
+            accepted[n] = {"estimate": v, "std": sd, "ci95": [lo, hi] if np.isfinite(lo) and np.isfinite(hi) else None,
+                           "ci95_method": how if np.isfinite(lo) and np.isfinite(hi) else "none",
+                           "ci95_open": list(d.open_ends(n)),
+                           **({"ci95_reason": after.interval(n).reason} if after.interval(n).reason else {})}
+    out = []
+    for i, name in enumerate(after.parameters.names):
+        unit = after.parameters.units[i]
+        out.append({"name": name, "unit": unit, "shown_in": display(name, unit)[0], "before": side(before, name),
+                    "added": name not in before.parameters.names, "null_value": nulls.get(name),
+                    "after": accepted.get(name) or side(after, name)})
+    return out
+
+
+def before_after_lines(d) -> list[str]:
+    """The before/after table of diagnosis.md: every parameter, its estimate ± std and 95 % interval
+    before the diagnosis (the case's model) and in the final joint fit, in engineering units."""
+    def cell(name, unit, side):
+        if side is None:
+            return "-"
+        text = pm_text(name, unit, side["estimate"], side["std"])
+        if side["ci95"] is None:
+            return f"{text}; no 95 % interval: {side.get('ci95_reason', '')}"
+        how = "" if side["ci95_method"] == "linearised" else f" ({side['ci95_method']})"
+        lo_open, hi_open = side["ci95_open"]
+        lo = "its lower limit" if lo_open else value_text(name, unit, side["ci95"][0]).split(" ")[0]
+        hi = "its upper limit" if hi_open else value_text(name, unit, side["ci95"][1]).split(" ")[0]
+        return f"{text}; 95 % [{lo}, {hi}]{how}"
+
+    lines = ["Every parameter before (the case's model fitted) and after (the final joint fit), 95 % intervals:", "",
+             "| parameter | unit | before | after |", "|---|---|---|---|"]
+    for row in before_after(d):
+        name, unit = row["name"], row["unit"]
+        before = cell(name, unit, row["before"])
+        if row["before"] is None:
+            null = row["null_value"]
+            before = ("not in the model" + (f" (the model without it: {value_text(name, unit, null)})"
+                                            if null is not None else ""))
+        lines.append(f"| {name} | {row['shown_in'] if row['shown_in'] not in ('-', '') else '-'} | {before} | "
+                     f"{cell(name, unit, row['after'])} |")
+    return lines
 
 
 class _One:
@@ -239,19 +320,23 @@ class _One:
 def _item(d, s, final: bool) -> dict:
     item = {"key": s.hypothesis.key, "kind": s.hypothesis.kind, "cause": CAUSES[s.hypothesis.cause],
             "title": s.hypothesis.title, "description": s.hypothesis.description, "score": s.score,
-            "score_dof": s.dof, "p_score": s.p_score, "collinear_with": s.collinear_with,
+            "score_dof": s.dof, "p_score": s.p_score, "group_size": s.group_size,
+            "p_score_single": s.p_single if s.group_size > 1 else s.p_score, "collinear_with": s.collinear_with,
             "extra_values": s.hypothesis.extra_values,
             "detectable": s.detectable}
     if s.refit is not None:
         item.update(dJ=s.dJ, p_lr=s.p_lr, aic=s.aic, bic=s.bic, akaike_weight=s.weight, status=s.refit.status,
                     determined=s.determined, caveats=[c.as_dict() for c in s.caveats],
-                    estimates={n: {"estimate": v, "std": sd, "ci95": [lo, hi]}
+                    estimates={n: {"estimate": v, "std": sd, "unit": unit_of(s, n),
+                                   "ci95": [lo, hi] if np.isfinite(lo) and np.isfinite(hi) else None}
                                for n, v, sd, lo, hi in _estimates(s)})
         if s.profile is not None:
             item["depth"] = s.profile.as_dict()
     if final:  # an accepted hypothesis: its parameters from the final joint fit
         item["estimates_in_round"] = item.pop("estimates", {})
-        item["estimates"] = {n: {"estimate": v, "std": sd, "ci95": [lo, hi], "from": "final joint fit",
+        item["estimates"] = {n: {"estimate": v, "std": sd, "unit": _unit(d.final.parameters, n),
+                                 "ci95": [lo, hi] if np.isfinite(lo) and np.isfinite(hi) else None,
+                                 "from": "final joint fit",
                                  "interval": ("profile likelihood" if (n in d.final_intervals or n in d.final.profiled)
                                               else "linearised"), "ci95_open": list(d.open_ends(n))}
                              for n, v, sd, lo, hi in d.estimates(s)}
@@ -281,12 +366,18 @@ def diagnosis_json(d) -> dict:
                    "parameters": dict(zip(b.names, d.baseline_fit.p))},
         "after": {"chi2": f.chi2, "dof": f.dof, "reduced_chi2": f.reduced_chi2, "p_value": f.p_value,
                   "parameters": dict(zip(f.names, d.final_fit.p)), "std": dict(zip(f.names, f.std)),
-                  "ci95": {n: [float(a), float(z)] for n, a, z in zip(f.names, lo, hi)},
-                  "caveats": [cv.as_dict() for cv in d.final.caveats]},
+                  "ci95": {n: ([float(a), float(z)] if np.isfinite(a) and np.isfinite(z) else None)
+                           for n, a, z in zip(f.names, lo, hi)},
+                  "units": dict(zip(f.names, d.final.parameters.units)),
+                  "status": d.final.status, "caveats": [cv.as_dict() for cv in d.final.caveats]},
+        "parameters": before_after(d),
+        "amended_case": AMENDED if d.accepted else None,
         "missing": [_item(d, s, True) for s in d.accepted],
         "rounds": [{"chi2": r.chi2, "dof": r.dof, "p_value": r.p_value,
                     "error_scales": [e.as_dict() for e in r.scales if e.estimated],
                     "scale_threshold": r.scale_threshold, "threshold": r.threshold,
+                    "hypotheses_scored": r.hypotheses, "tests": r.tests, "screened": r.screened,
+                    "bonferroni_family": r.family,
                     "mismatches": [m.__dict__ for m in r.mismatches],
                     "ranking": [_item(d, s, False) for s in r.ranking],
                     "akaike_weights": r.weights, "aic_without": r.aic,
@@ -303,6 +394,8 @@ def write_diagnosis(d, out: Path, plots: bool = True, exploration=None) -> None:
     with result_set(out, "diagnose") as staging:
         write_atomic(staging / "diagnosis.md", diagnosis_text(d))
         write_json(staging / "diagnosis.json", diagnosis_json(d))
+        if d.accepted and d.loaded is not None:  # paths in it relative to `out`, where it ends up
+            write_atomic(staging / AMENDED, amended_text(d, Path(out)))
         if plots:
             from geoback.reports.plots.diagnosis import plot_before_after
 

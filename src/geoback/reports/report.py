@@ -13,7 +13,7 @@ import numpy as np
 from geoback import __version__
 from geoback.outputs import write_atomic, write_csv, write_json, write_matrix_csv
 from geoback.reports.resultsets import result_set
-from geoback.reports.units import number, rounded, shown
+from geoback.units import number, rounded, shown
 
 
 def reading_label(lab, staged: bool = False) -> str:
@@ -29,8 +29,6 @@ def summary(res, exploration=None, readings=()) -> dict:
     """summary.json: the estimate, its assessment and the run's counts; `readings`: how the readings
     were matched (observation.readings.CaseReadings.lines), one line per instrument."""
     f, rel, params = res.fit, res.reliability, res.parameters
-    lo, hi = rel.interval95()
-    lo, hi = res.intervals95()
     out = {
         "case": res.name,
         "case_hash": res.case_hash,
@@ -42,9 +40,7 @@ def summary(res, exploration=None, readings=()) -> dict:
         "weighting": res.weighting,
         "iterations": f.iterations,
         "parameters": {n: {"unit": params.units[i], "initial": params.initial[i], "estimate": f.p[i],
-                           "std": rel.std[i], "ci95": [lo[i], hi[i]],
-                           "ci95_method": "profile likelihood" if n in res.profiled else "linearised",
-                           "ci95_open": list(res.profiled[n][2:]) if n in res.profiled else [False, False],
+                           "std": rel.std[i], **res.interval(n).as_dict(),  # ci95 (None: ci95_reason), method, open
                            "at_bound": bool(f.at_bound[i]),
                            **(res.prior_posterior.as_dict(i) if res.prior_posterior is not None else {})}
                        for i, n in enumerate(params.names)},
@@ -103,18 +99,21 @@ def report_text(res, exploration=None, readings=()) -> str:
               chi2_line(rel),
               f"- AIC = {rel.aic:.6g}, BIC = {rel.bic:.6g}, condition number = {rel.condition:.3g}", "",
               "| parameter | unit | initial | estimate | std | 95 % interval |", "|---|---|---|---|---|---|"]
-    lo, hi = res.intervals95()
     case_units = []
     for i, n in enumerate(params.names):
         fct, unit = shown(params.units[i], f.p[i])
         bound = " (at bound)" if f.at_bound[i] else ""
-        how, (lo_open, hi_open) = "", (False, False)
-        if n in res.profiled:
-            how, (lo_open, hi_open) = " (profile likelihood)", res.profiled[n][2:]
-        ends = (f"≤ its bound {number(lo[i] * fct)}" if lo_open else number(lo[i] * fct),
-                f"≥ its bound {number(hi[i] * fct)}" if hi_open else number(hi[i] * fct))
+        iv = res.interval(n)
+        how = "" if iv.method == "linearised" else f" ({iv.method})"
+        if iv.exists:
+            lo_open, hi_open = iv.open
+            ends = (f"≤ its bound {number(iv.low * fct)}" if lo_open else number(iv.low * fct),
+                    f"≥ its bound {number(iv.high * fct)}" if hi_open else number(iv.high * fct))
+            cell = f"[{ends[0]}, {ends[1]}]{how}"
+        else:
+            cell = f"none: {iv.reason}"
         lines.append(f"| {n} | {unit} | {number(params.initial[i] * fct)} | {number(f.p[i] * fct)}{bound} | "
-                     f"{number(rel.std[i] * fct, 3)}{_cv(f.p[i], rel.std[i])} | [{ends[0]}, {ends[1]}]{how} |")
+                     f"{number(rel.std[i] * fct, 3)}{_cv(f.p[i], rel.std[i])} | {cell} |")
         if fct != 1.0:
             case_units.append(f"{n} = {f.p[i]:.6g} ± {number(rel.std[i], 3)} {params.units[i]}")
     if case_units:
@@ -261,7 +260,7 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
                "prior_std", "prior_source", "posterior_std", "identifiability",
                "unit_shown", "estimate_shown", "std_shown", "ci95_low_shown", "ci95_high_shown"],
               [[n, params.units[i], params.initial[i], f.p[i], rel.std[i], lo[i], hi[i],
-                "profile likelihood" if n in res.profiled else "linearised", bool(f.at_bound[i])]
+                res.interval(n).method, bool(f.at_bound[i])]
                + ([pp.prior_std[i], pp.prior_source[i], pp.posterior_std[i], pp.identifiability[i]] if pp is not None
                   else ["", "", "", ""])
                + [shown_as[i][1]] + [rounded(v * shown_as[i][0]) for v in (f.p[i], rel.std[i], lo[i], hi[i])]

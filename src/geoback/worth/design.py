@@ -104,11 +104,31 @@ def separate(analysis, d: DesignResult, progress=None) -> DesignResult:
     return replace(d, discrimination=discriminate(pair[0], pair[1], [b for _, _, b in cands], d.names))
 
 
+def require_design(loaded) -> None:
+    """The case must have a design section (checked by `geoback design` before any work, and by ``design``)."""
+    if loaded.case.design is None:
+        raise loaded.error(("design",), "expected a design section with candidate instruments (see `geoback "
+                                        "init`), found none")
+
+
+def require_estimate(result, what: str = "design") -> None:
+    """Candidates are compared at the estimate: an identification that did not converge is refused."""
+    from geoback.errors import GeobackError
+
+    if result.fit.status != "converged" or not result.fit.moved:
+        raise GeobackError(f"{what}: the identification did not converge ({result.status}): candidates are compared "
+                           "at the estimate; run `geoback run` and fix the case first")
+
+
 def design(analysis, result, progress=None) -> DesignResult:
-    """Rank the case's candidate instruments at the estimate of `result` (module docstring)."""
+    """Rank the case's candidate instruments at the estimate of `result` (an identification of this
+    analysis' case that converged: refused otherwise, as `geoback design` refuses it; module docstring)."""
     from geoback.worth.forecast import forecast
 
     t0 = time.perf_counter()
+    require_design(analysis.loaded)
+    analysis.check_identification(result, "design")
+    require_estimate(result)
     loaded, sim = analysis.loaded, analysis.simulation
     spec = loaded.case.design
     before_counts = sim.counters.snapshot()

@@ -44,6 +44,60 @@ DRAWS, SECONDS = 400, 20.0  # sampling check: at most this many draws, within ab
 
 
 @dataclass(frozen=True)
+class Forecast:
+    """One named forecast of a ``Forecasts``, point by point (``fc["trough"]``): where, the value,
+    its std and 95 % band, the sampled range, the alert level and the probability of exceeding it,
+    each in `unit` (SI: m for displacements, kN/m and kNm/m for the lining's forces)."""
+
+    name: str
+    kind: str
+    stage: str
+    quantity: tuple[str, ...]
+    unit: str
+    x: np.ndarray
+    y: np.ndarray
+    position: np.ndarray
+    position_label: str
+    values: np.ndarray
+    std: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    alert: float
+    p_exceed: np.ndarray
+    sampled_low: np.ndarray | None = None
+    sampled_high: np.ndarray | None = None
+    nonlinear: bool = False  # the sampled range differs from the linearised band (a warning)
+
+    def __post_init__(self):
+        for k, v in self.__dict__.items():
+            if isinstance(v, np.ndarray):
+                v = v.copy()
+                v.setflags(write=False)
+                object.__setattr__(self, k, v)
+
+    @property
+    def band(self) -> tuple[np.ndarray, np.ndarray]:
+        """The linearised 95 % band (low, high) of every point."""
+        return self.low, self.high
+
+    def __len__(self) -> int:
+        return len(self.values)
+
+    def as_dict(self) -> dict:
+        """JSON-ready, point by point."""
+        def num(v):
+            return [float(x) if np.isfinite(x) else None for x in v] if v is not None else None
+
+        return {"name": self.name, "kind": self.kind, "stage": self.stage, "unit": self.unit,
+                "quantity": list(self.quantity), "position_label": self.position_label,
+                "position": num(self.position), "x": num(self.x), "y": num(self.y), "values": num(self.values),
+                "std": num(self.std), "band": [num(self.low), num(self.high)],
+                "alert": float(self.alert) if np.isfinite(self.alert) else None, "p_exceed": num(self.p_exceed),
+                "sampled": None if self.sampled_low is None else [num(self.sampled_low), num(self.sampled_high)],
+                "nonlinear": self.nonlinear}
+
+
+@dataclass(frozen=True)
 class Forecasts:
     """Every forecast row at the estimate: where, what, value, std and 95 % bands (linearised and
     sampled), the probability of exceeding an alert level; readers only from here on."""
@@ -83,6 +137,33 @@ class Forecasts:
 
     def rows(self, name: str) -> np.ndarray:
         return np.array([i for i, f in enumerate(self.forecast) if f == name], np.int64)
+
+    def __getitem__(self, name: str) -> Forecast:
+        """The forecast called `name` (the case's forecasts[].name), point by point: ``fc["trough"]``."""
+        if not isinstance(name, str) or name not in self.forecast:
+            raise KeyError(f"{name!r}: expected the name of a forecast of the case ({', '.join(self.names)})")
+        i = self.rows(name)
+        units = {self.unit[k] for k in i}
+        sampled = self.sampled_low is not None
+        return Forecast(name, self.kind[i[0]], self.stage[i[0]], tuple(self.quantity[k] for k in i),
+                        units.pop() if len(units) == 1 else ", ".join(sorted(units)),
+                        self.x[i], self.y[i], self.position[i], self.position_label[i[0]], self.value[i],
+                        self.std[i], self.low[i], self.high[i], float(self.alert[i[0]]), self.p_exceed[i],
+                        self.sampled_low[i] if sampled else None, self.sampled_high[i] if sampled else None,
+                        name in self.nonlinear)
+
+    def __contains__(self, name) -> bool:
+        return name in self.forecast
+
+    def __iter__(self):
+        """The forecasts by name, each a ``Forecast`` (``for f in fc: f.name, f.values, f.band``)."""
+        return (self[n] for n in self.names)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def keys(self) -> list[str]:
+        return self.names
 
     def contributions(self) -> np.ndarray:
         """Fraction of each row's variance that knowing parameter j exactly would remove (correlations
@@ -259,7 +340,9 @@ def forecast(analysis, result, draws: int | None = None, seconds: float = SECOND
              progress=None) -> Forecasts | None:
     """The case's forecasts at the estimate of `result` (an Identification of `analysis`): value,
     FOSM std and band, probability of exceeding the alert levels, and a sampling check through the
-    model (`draws` parameter sets at most, within about `seconds`; 0 to skip). None without forecasts."""
+    model (`draws` parameter sets at most, within about `seconds`; 0 to skip). None without forecasts.
+    An identification of another case (or of a model with other quantities) is refused."""
+    analysis.check_identification(result, "forecast")
     loaded = analysis.loaded
     if not loaded.case.forecasts:
         return None

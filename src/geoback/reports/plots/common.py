@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 from matplotlib import patheffects  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from geoback.reports.units import shown  # noqa: E402
+from geoback.units import shown  # noqa: E402
 
 DPI = 150
 HALO = [patheffects.withStroke(linewidth=2.5, foreground="white")]
