@@ -143,7 +143,7 @@ def test_two_effects_are_reported_from_the_final_joint_fit(tmp_path):
     write_diagnosis(d, tmp_path, plots=False)
     data = json.loads((tmp_path / "diagnosis.json").read_text())
     md = (tmp_path / "diagnosis.md").read_text()
-    from geoback.diagnosis.units import shown
+    from geoback.units import value_text as shown
 
     units = dict(zip(d.final.parameters.names, d.final.parameters.units))
     for s, item in zip(d.accepted, data["missing"]):

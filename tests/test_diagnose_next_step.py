@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 import geoback
-from geoback.diagnosis.units import shown
+from geoback.units import value_text as shown
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE = ROOT / "cases" / "concealed" / "layer-boundary.yaml"
