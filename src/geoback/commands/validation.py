@@ -12,6 +12,7 @@ the result says so.
 from __future__ import annotations
 
 from geoback.case.loading import LoadedCase, MeshSettings
+from geoback.case.meshsize import describe_bytes as _bytes
 
 VALIDATE_MESH_DOFS = 50_000  # measured cold (gmsh included): 33 k DOFs 2.2 s 260 MB, 73 k DOFs 4.7 s 440 MB
 
@@ -25,11 +26,11 @@ def check_case(loaded: LoadedCase) -> str:
     """Build what `run` builds (or its coarse stand-in); return the one-line verdict. Raises
     GeobackError (located when it is the case's fault) at the first problem found."""
     from geoback.inference.identification import prepare
-    from geoback.case.meshsize import mesh_inputs
-    from geoback.case.meshsize import estimate
+    from geoback.case.meshsize import Work, estimate, mesh_inputs
 
     case = loaded.case
-    est = estimate(mesh_inputs(case))
+    work = Work.of(case)
+    est = estimate(mesh_inputs(case), work)
     name = loaded.path if loaded.path is not None else case.name
     if est.dofs <= VALIDATE_MESH_DOFS:
         analysis = prepare(loaded)
@@ -40,4 +41,14 @@ def check_case(loaded: LoadedCase) -> str:
                      f"parameters checked on a coarser mesh of the same geometry")
     warned = "".join(f"\nwarning: [{c.code}] {c.message}" for c in analysis.notices)
     return (f"{name}: valid ({len(case.instruments)} instruments, {analysis.simulation.survey.m} readings, "
-            f"{len(case.parameters)} parameters, {mesh_text}){warned}")
+            f"{len(case.parameters)} parameters, {mesh_text}){warned}\n{cost_text(est)}")
+
+
+def cost_text(est) -> str:
+    """What `run` will cost: 'run: ~210 MB at most; Mohr-Coulomb ground: up to 10 load increments ...'."""
+    work = est.work
+    check = ""
+    if est.fine_dofs is not None:
+        check = (f" (its discretisation-error check skipped: {est.check_skipped})" if est.check_skipped else
+                 f" (with its discretisation-error check on a mesh twice as fine, about {est.fine_dofs:,.0f} DOFs)")
+    return f"cost of `geoback run`: ~{_bytes(est.run_bytes)} of memory at most{check}; {work.describe(est.dofs)}"
