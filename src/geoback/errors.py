@@ -38,3 +38,11 @@ class ForwardFailure(GeobackError):
     """The model could not be solved at the values asked (a non-linear forward run that did not
     converge, a state outside what the model admits). Inside a fit, a trial point where this
     happens is a rejected step (``estimate.fit``); elsewhere it is reported like any other error."""
+
+
+class TimeLimit(GeobackError):
+    """The wall-clock limit of a command (``--time-limit``, ``geoback.case.budget``) passed in work that
+    could not stop early with a result; the message says where the work was. Exit code 1: the input
+    was not refused, the work was cut short."""
+
+    exit_code = 1

@@ -137,11 +137,10 @@ def _covariance_problem(ins) -> tuple[str, str] | None:
 
 def mesh_size_problem(case: Case, allow_large: bool = False) -> tuple[tuple, str] | None:
     """(path, message) when the case's mesh is estimated beyond the limit (geoback.case.meshsize)."""
-    from geoback.case.meshsize import mesh_inputs
-    from geoback.case.meshsize import size_problem
+    from geoback.case.meshsize import Work, mesh_inputs, size_problem
 
     settings = {f: getattr(case.mesh, f) for f in ("size_tunnel", "size_far", "size_instruments")}
-    found = size_problem(mesh_inputs(case), allow_large=allow_large, settings=settings)
+    found = size_problem(mesh_inputs(case), allow_large=allow_large, settings=settings, work=Work.of(case))
     return (("mesh", found[0]), found[1]) if found else None
 
 

@@ -17,11 +17,27 @@ machine (same benchmark). ``DEFAULT_MAX_DOFS`` is the default limit (``GEOBACK_M
 environment changes it): cases above it are refused before any meshing, with the estimate in the
 message, unless ``allow_large`` (``--allow-large``) is given; ``HARD_MAX_DOFS`` is refused even then (gmsh and the sparse solvers index with 32-bit
 integers, and no machine this runs on has the memory).
+
+Each physics costs differently per DOF (``Work``, from the case: ``Work.of``). The one-step elastic
+model holds one symmetric factor; a staged model with a lining holds SuperLU's factor with the wall
+last and the wall's Schur complement; a Mohr-Coulomb run holds two unsymmetric factors (the Newton
+matrix and the converged tangent), the stress history and the sensitivities at every quadrature
+point, and factorises again at every Newton iteration of every plastic load increment. Memory is
+``BYTES_PER_DOF[physics]`` per DOF above the interpreter's ``RUN_BASE_BYTES``, fitted to measured
+peaks (``benchmarks/physics_costs.py``); a run that checks the discretisation error (``fit:
+mesh_error``, the default) also solves once on a mesh twice as fine (four times the DOFs), counted
+when that check is made (``check_fits``: it is skipped when it would need more memory than the
+limit allows). The limit is one of memory: a physics that needs more per DOF is allowed
+proportionally fewer DOFs (``Work.limit_dofs``), so every accepted case runs in about the memory the
+elastic limit announces. The time of one forward run is estimated from its factorisations
+(``Work.forward_seconds``): Mohr-Coulomb from the load increments of its fixed schedule
+(``strength.stage_increments``; elastic spans are one increment, so this is an upper bound) and
+``NEWTON`` factorisations each.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -39,6 +55,81 @@ HARD_MAX_DOFS = 50_000_000
 RUN_BASE_BYTES = 150e6
 RUN_BYTES_PER_DOF = {1: 3_000.0, 2: 3_300.0}
 DEFAULT_MAX_DOFS = 500_000  # default limit: `run` of such a case takes about 1 min and 1.8 GB
+# bytes per DOF above RUN_BASE_BYTES of one forward run with the sensitivities of a fit, measured
+# (benchmarks/physics_costs.py, quadratic elements): a staged case with a lining 8.4 k DOFs 0.17 GB,
+# 30 k 0.37 GB, 83 k 0.97 GB; Mohr-Coulomb (three stages, four parameters) 5.2 k DOFs 0.16 GB,
+# 30 k 0.46 GB, 55 k 0.79 GB, 100 k 1.31 GB (463 k DOFs ran out of 5.4 GB where 1.7 GB had been announced)
+BYTES_PER_DOF = {"elastic": None, "staged": 10_400.0, "mohr-coulomb": 12_100.0}  # None: RUN_BYTES_PER_DOF
+PHYSICS_WORDS = {"elastic": "linear-elastic ground", "staged": "staged construction",
+                 "mohr-coulomb": "Mohr-Coulomb ground"}
+NEWTON = 3  # factorisations per plastic load increment (Newton iterations and the converged tangent), measured 2.5-3
+SECONDS_PER_FACTORISATION_DOF = 7.5e-6  # one Mohr-Coulomb factorisation with its assembly and return mapping,
+# per DOF, on the 2-core reference machine under load (10 k DOFs 0.064 s, 55 k 0.27 s, 100 k 0.76 s)
+FINE = 4.0  # the discretisation-error check's mesh (twice as fine) has at most about four times the DOFs
+
+
+@dataclass(frozen=True)
+class Work:
+    """What a case asks of its mesh beyond its size: the physics, the load increments of one
+    forward run, and whether `run` checks the discretisation error on a mesh twice as fine."""
+
+    physics: str = "elastic"  # 'elastic' | 'staged' | 'mohr-coulomb'
+    increments: int = 1  # load increments of one forward run (Mohr-Coulomb: the fixed schedule's)
+    check: bool = True
+
+    @classmethod
+    def of(cls, case: Case) -> "Work":
+        from geoback.case.strength import is_plastic, stage_increments
+
+        check = case.fit.mesh_error != "ignore"
+        if is_plastic(case):
+            releases = [1.0] if case.construction is None else \
+                [float(s.release) for s in case.construction.stages if s.release is not None] or [1.0]
+            releases = np.clip(np.nan_to_num(np.asarray(releases, float), nan=1.0, posinf=1.0), 0.0, 1e3)
+            steps = np.diff(np.concatenate([[0.0], np.maximum.accumulate(releases)]))
+            return cls("mohr-coulomb", int(sum(stage_increments(steps))), check)
+        if case.construction is not None:
+            return cls("staged", len(case.construction.stages), check)
+        return cls("elastic", 1, check)
+
+    def bytes_per_dof(self, order: int = 2) -> float:
+        per = BYTES_PER_DOF.get(self.physics)
+        return RUN_BYTES_PER_DOF.get(order, 3_300.0) if per is None else per * (1.0 if order == 2 else 0.9)
+
+    def forward_bytes(self, dofs: float, order: int = 2) -> float:
+        """Peak memory of one forward run with the sensitivities of a fit (bytes)."""
+        return RUN_BASE_BYTES + self.bytes_per_dof(order) * dofs
+
+    def limit_dofs(self, limit: float, order: int = 2) -> float:
+        """The DOFs this physics may have for the memory `limit` DOFs of elastic ground need."""
+        return limit * RUN_BYTES_PER_DOF.get(order, 3_300.0) / self.bytes_per_dof(order)
+
+    @property
+    def factorisations(self) -> int:
+        """Factorisations of one forward run (an upper bound for Mohr-Coulomb: elastic spans cost one)."""
+        return NEWTON * self.increments + 1 if self.physics == "mohr-coulomb" else 1 + (self.physics == "staged")
+
+    def forward_seconds(self, dofs: float) -> float:
+        """One forward run on the 2-core reference machine (Mohr-Coulomb; rough for the others)."""
+        return self.factorisations * SECONDS_PER_FACTORISATION_DOF * dofs
+
+    def describe(self, dofs: float) -> str:
+        """'Mohr-Coulomb ground: 10 load increments a forward run (about 31 factorisations, ~2 s)'."""
+        if self.physics != "mohr-coulomb":
+            return PHYSICS_WORDS[self.physics]
+        return (f"{PHYSICS_WORDS[self.physics]}: up to {self.increments} load increments a forward run (about "
+                f"{self.factorisations} factorisations, ~{_seconds(self.forward_seconds(dofs))}; a fit takes 10 to "
+                f"30 forward runs)")
+
+
+def _seconds(s: float) -> str:
+    if not math.isfinite(s):
+        return "forever"
+    if s < 60:
+        return f"{_sig(max(s, 0.1))} s"
+    if s < 3600:
+        return f"{_sig(s / 60)} min"
+    return f"{_sig(s / 3600)} h"
 
 
 def max_dofs() -> float:
@@ -74,6 +165,9 @@ class MeshEstimate:
     run_bytes: float  # peak memory of `geoback run`
     order: int
     by_field: dict = field(default_factory=dict)  # elements where each size setting rules
+    work: Work = field(default_factory=Work)  # the physics it is estimated for
+    fine_dofs: float | None = None  # DOFs of the discretisation-error check's mesh (staged, Mohr-Coulomb)
+    check_skipped: str = ""  # why that check will be skipped ('' when it will be made)
 
     @property
     def worst(self) -> str:
@@ -103,6 +197,11 @@ def _count(n: float) -> str:
     return f"{round(n, -1):,.0f}" if n >= 100 else f"{n:.0f}"
 
 
+def describe_bytes(b: float) -> str:
+    """'1.8 GB', '210 MB'."""
+    return _bytes(b)
+
+
 def _bytes(b: float) -> str:
     if not math.isfinite(b):
         return "unbounded memory"
@@ -112,8 +211,10 @@ def _bytes(b: float) -> str:
     return f"{b / 1e3:.0f} kB"
 
 
-def estimate(inputs: dict) -> MeshEstimate:
-    """Estimate from :func:`mesh_inputs` (a plain dict; no gmsh involved)."""
+def estimate(inputs: dict, work: Work | None = None, limit: float | None = None) -> MeshEstimate:
+    """Estimate from :func:`mesh_inputs` (a plain dict; no gmsh involved), for the physics of
+    `work` (default: elastic ground); `limit` (DOFs of elastic ground, default ``max_dofs()``) decides
+    whether the run's discretisation-error check is made (``check_fits``)."""
     order = int(inputs.get("order", 2))
     try:
         counts, boundary = _integrate(inputs)
@@ -124,12 +225,49 @@ def estimate(inputs: dict) -> MeshEstimate:
     # (3T + B)/2 edges; quadratic elements have a node on every edge as well
     nodes = 2 * elements + boundary + 1 if order == 2 else (elements + boundary) / 2 + 1
     dofs = 2.0 * nodes
-    return MeshEstimate(elements, nodes, dofs, run_bytes(dofs, order), order, counts)
+    fine, skipped = None, ""
+    if work is not None and work.check and BYTES_PER_DOF.get(work.physics) is not None and math.isfinite(dofs):
+        fine = estimate(finer(inputs, 2.0)).dofs  # the discretisation-error check's mesh
+        skipped = check_fits(work, fine, order, limit)
+    return MeshEstimate(elements, nodes, dofs, run_bytes(dofs, order, work, limit, fine), order, counts,
+                        work or Work(), fine, skipped)
 
 
-def run_bytes(dofs: float, order: int = 2) -> float:
-    """Peak memory of `geoback run` at this many DOFs (bytes)."""
-    return RUN_BASE_BYTES + RUN_BYTES_PER_DOF.get(order, 3_300.0) * dofs
+def finer(inputs: dict, factor: float) -> dict:
+    """Mesh inputs `factor` times finer (as ``refined_case``)."""
+    si = inputs.get("size_instruments")
+    return dict(inputs, size_tunnel=inputs["size_tunnel"] / factor, size_far=inputs["size_far"] / factor,
+                size_instruments=si / factor if si else si)
+
+
+def run_bytes(dofs: float, order: int = 2, work: Work | None = None, limit: float | None = None,
+              fine_dofs: float | None = None) -> float:
+    """Peak memory of `geoback run` at this many DOFs (bytes), for the physics of `work` (default
+    elastic ground: fitted to whole runs, the check included); the larger of the fit's forward runs and
+    the discretisation-error check's run on the mesh twice as fine (`fine_dofs`, default FINE times
+    the DOFs), when that check is made."""
+    if work is None or BYTES_PER_DOF.get(work.physics) is None:
+        return RUN_BASE_BYTES + RUN_BYTES_PER_DOF.get(order, 3_300.0) * dofs
+    peak = work.forward_bytes(dofs, order)
+    fine_dofs = FINE * dofs if fine_dofs is None else fine_dofs
+    if work.check and not check_fits(work, fine_dofs, order, limit):
+        peak = max(peak, work.forward_bytes(fine_dofs, order))
+    return peak
+
+
+def budget_bytes(limit: float | None = None, order: int = 2) -> float:
+    """The memory the DOF limit allows (`limit` DOFs of elastic ground; default ``max_dofs()``)."""
+    return RUN_BASE_BYTES + RUN_BYTES_PER_DOF.get(order, 3_300.0) * (max_dofs() if limit is None else limit)
+
+
+def check_fits(work: Work, fine_dofs: float, order: int = 2, limit: float | None = None) -> str:
+    """'' when the discretisation-error check's run on `fine_dofs` fits in the memory the limit
+    allows; else why it is skipped."""
+    need, allowed = work.forward_bytes(fine_dofs, order), budget_bytes(limit, order)
+    if need <= allowed:
+        return ""
+    return (f"the mesh twice as fine would have about {_count(fine_dofs)} DOFs and need ~{_bytes(need)} with "
+            f"{PHYSICS_WORDS.get(work.physics, work.physics)} (more than the ~{_bytes(allowed)} the size limit allows)")
 
 
 def _size_field(inputs: dict, pts: np.ndarray | None):
@@ -235,22 +373,27 @@ def _edges(inputs: dict, h) -> tuple[float, float]:
 
 
 def size_problem(inputs: dict, allow_large: bool = False, settings: dict | None = None,
-                 max_dofs: float | None = None) -> tuple[str, str] | None:
+                 max_dofs: float | None = None, work: Work | None = None) -> tuple[str, str] | None:
     """(mesh setting to blame, message) when the mesh would exceed the limit; None when it fits.
 
     `settings` maps a mesh setting to the value written in the case (None for a default), for
     the message. The message reads 'expected ..., found ...; lower ... or pass --allow-large'.
+    `work`: the case's physics (``Work.of(case)``; default elastic ground), whose limit in DOFs is
+    the elastic limit's memory (``Work.limit_dofs``).
     """
-    est = estimate(inputs)
-    limit = HARD_MAX_DOFS if allow_large else (globals()["max_dofs"]() if max_dofs is None else max_dofs)
+    work = work or Work()
+    elastic_limit = HARD_MAX_DOFS if allow_large else (globals()["max_dofs"]() if max_dofs is None else max_dofs)
+    est = estimate(inputs, work, None if allow_large else elastic_limit)
+    limit = work.limit_dofs(elastic_limit, est.order)
     if est.dofs <= limit:
         return None
     worst = est.worst
     written = (settings or {}).get(worst)
     value = f"{worst} {written:g}" if isinstance(written, (int, float)) else f"{worst} (default {inputs.get(worst, 0):g})"
-    cap = run_bytes(limit, est.order)
-    message = (f"expected mesh sizes giving at most {_count(limit)} DOFs (~{_bytes(cap)} to run), found sizes "
-               f"giving {est.describe()} (about {_count(est.elements)} elements, mostly from {value}); ")
+    cap = run_bytes(limit, est.order, replace(work, check=False))
+    physics = "" if work.physics == "elastic" else f" for {PHYSICS_WORDS[work.physics]}"
+    message = (f"expected mesh sizes giving at most {_count(limit)} DOFs{physics} (~{_bytes(cap)} to run), found "
+               f"sizes giving {est.describe()} (about {_count(est.elements)} elements, mostly from {value}); ")
     if allow_large:
         message += "coarsen the mesh (larger sizes): this is beyond what geoback can solve"
     else:

@@ -27,6 +27,15 @@ from geoback.case.limits import QUANTITIES, Limits
 
 # a linear-elastic layer next to mohr-coulomb ones: a strength no stress reaches (c in kPa, angles in degrees)
 ELASTIC = {"c": 1e30, "phi": 30.0, "psi": 30.0, "tension": math.inf}
+# the load increments of an elastoplastic run (``plastic.py``): equal increments per unit of release,
+# at least MIN_STAGE per stage; known from the case's releases before anything is meshed (``meshsize.py``)
+INCREMENTS = 10
+MIN_STAGE = 2
+
+
+def stage_increments(steps, per_unit: int = INCREMENTS) -> list[int]:
+    """Load increments of each stage releasing the fractions `steps` (beta_k - beta_(k-1))."""
+    return [max(MIN_STAGE, int(math.ceil(per_unit * float(s) - 1e-9))) for s in steps]
 
 
 def is_plastic(case: Case) -> bool:

@@ -107,6 +107,35 @@ def _allow_large():
     return typer.Option(False, "--allow-large", help=ALLOW_LARGE_HELP)
 
 
+TIME_LIMIT_HELP = ("wall-clock limit: past it the work stops with what it found (the fit's best point, the "
+                   "diagnosis so far), written with exit code 1; work that cannot stop early (a forward run) is "
+                   "cut after a grace of a quarter of the limit (at least 30 s) with where it was. Seconds or "
+                   "'90 min', '2 h'; 'none' for no limit (default 1 h, or GEOBACK_TIME_LIMIT)")
+
+
+def _time_limit_option():
+    return typer.Option(None, "--time-limit", help=TIME_LIMIT_HELP)
+
+
+def _limited(time_limit: Optional[str], say=None):
+    """The command's budget (geoback.case.budget): its time limit and where progress lines go."""
+    from geoback.case import budget
+
+    seconds = budget.default_seconds() if time_limit is None else budget.parse_seconds(time_limit)
+    return budget.limited(seconds, say=say)
+
+
+def _cut_short(what: str) -> bool:
+    """Say so when the time limit stopped the work early (True then)."""
+    from geoback.case import budget
+
+    where = budget.reached()
+    if where:
+        typer.echo(f"warning: {what} stopped at {budget.describe_limit()} (reached in {where}): what it had found is "
+                   f"written; raise the limit with --time-limit to let it finish", err=True)
+    return bool(where)
+
+
 def _load(case: Path, allow_large: bool = False):
     from geoback.case.loading import load_case
 
@@ -207,8 +236,14 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              plots: bool = typer.Option(False, "--plots", help="also draw the predicted readings along every "
                                         "instrument (predicted.png and .svg)"),
              as_json: bool = _json_option(),
-             allow_large: bool = _allow_large()):
+             allow_large: bool = _allow_large(),
+             time_limit: Optional[str] = _time_limit_option()):
     """Forward run: predicted readings and the field; or study data (--readings-out, --noise)."""
+    with _limited(time_limit, _say):
+        _simulate(case, out, vtu, set_, refine, noise, seed, readings_out, as_json, allow_large)
+
+
+def _simulate(case, out, vtu, set_, refine, noise, seed, readings_out, as_json, allow_large):
     if seed < 0:
         raise GeobackError(f"--seed: expected a whole number 0 or above, found {seed}")
     out = _check_out(out)
@@ -275,7 +310,8 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
              plots: bool = typer.Option(True, help="write the before/after figure"),
              quiet: bool = typer.Option(False, "--quiet", "-q"),
              as_json: bool = _json_option(),
-             allow_large: bool = _allow_large()):
+             allow_large: bool = _allow_large(),
+             time_limit: Optional[str] = _time_limit_option()):
     """Is the model adequate? If not: where is the mismatch, what physics is missing, how much better it fits."""
     from geoback.diagnosis import diagnose as run_diagnosis
     from geoback.reports.diagnosis_report import diagnosis_text, write_diagnosis
@@ -288,22 +324,26 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
     loaded = _load(case, allow_large)
     folder = _out_dir(loaded, out)
     say = None if quiet else _say
-    d = run_diagnosis(loaded, alpha=alpha, progress=say)
-    exploration = explore(d.final_misfit, d.final, ("profiles",)) if plots else None
-    write_diagnosis(d, folder, plots=plots, exploration=exploration)
-    if as_json:
-        _print_json(folder / "diagnosis.json")
-    elif not quiet:
-        typer.echo(diagnosis_text(d))
-    else:
-        typer.echo(verdict(d))
-    amended = ", amended.yaml (the case with the accepted extensions: `geoback run` it to go on)" if d.accepted else ""
-    typer.echo(f"-> {folder}/diagnosis.md, diagnosis.json{amended}", err=True)
+    with _limited(time_limit, say):
+        d = run_diagnosis(loaded, alpha=alpha, progress=say)
+        exploration = explore(d.final_misfit, d.final, ("profiles",)) if plots else None
+        write_diagnosis(d, folder, plots=plots, exploration=exploration)
+        if as_json:
+            _print_json(folder / "diagnosis.json")
+        elif not quiet:
+            typer.echo(diagnosis_text(d))
+        else:
+            typer.echo(verdict(d))
+        amended = ", amended.yaml (the case with the accepted extensions: `geoback run` it to go on)" \
+            if d.accepted else ""
+        typer.echo(f"-> {folder}/diagnosis.md, diagnosis.json{amended}", err=True)
+        if _cut_short("the diagnosis"):
+            raise typer.Exit(1)
 
 
 EXIT_CODES = """Exit codes: 0 converged (warnings, if any, are printed); 1 the fit did not converge or did not
-move from the initial values; 2 the input was refused (the message names file, line and field);
-3 with --strict: converged, but with warnings; 130 interrupted."""
+move from the initial values, or was stopped at the time limit (--time-limit); 2 the input was refused
+(the message names file, line and field); 3 with --strict: converged, but with warnings; 130 interrupted."""
 
 
 @app.command(epilog=EXIT_CODES)
@@ -324,7 +364,8 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         strict: bool = typer.Option(False, "--strict", help="exit 3 if the result carries any warning (for CI)"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="print only the final line"),
         as_json: bool = _json_option(),
-        allow_large: bool = _allow_large()):
+        allow_large: bool = _allow_large(),
+        time_limit: Optional[str] = _time_limit_option()):
     """Identify the case's parameters by maximum likelihood and write all results."""
     method = method.value if method is not None else None
     out = _check_out(out)
@@ -352,9 +393,11 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         units[:] = analysis.parameters.units
 
     matched: list[str] = []
-    res = run_case(loaded, folder, method=method, progress=progress, plots=plots, say=_say if talk else None,
-                   prepared=named, profile="all" if profile else "auto", matched=matched.extend,
-                   objective_map=objective_map.value)
+    with _limited(time_limit, _say if talk else None):
+        res = run_case(loaded, folder, method=method, progress=progress, plots=plots, say=_say if talk else None,
+                       prepared=named, profile="all" if profile else "auto", matched=matched.extend,
+                       objective_map=objective_map.value)
+        _cut_short("the identification")
     if as_json:
         _print_json(folder / "summary.json")
     elif not quiet:
@@ -385,8 +428,14 @@ def design(case: Path = typer.Argument(..., help="case file (YAML) with a design
                                          "tell apart the two hypotheses `geoback diagnose` finds leading "
                                          "(runs the diagnosis first)"),
            as_json: bool = _json_option(),
-           allow_large: bool = _allow_large()):
+           allow_large: bool = _allow_large(),
+           time_limit: Optional[str] = _time_limit_option()):
     """Rank candidate instruments by how much they would narrow the forecasts (or the parameters)."""
+    with _limited(time_limit, _say):
+        _design(case, out, plots, separate, as_json, allow_large)
+
+
+def _design(case, out, plots, separate, as_json, allow_large):
     out = _check_out(out)
     loaded = _load(case, allow_large)
     from geoback.worth.design import require_design, require_estimate

@@ -12,6 +12,7 @@ the result says so.
 from __future__ import annotations
 
 from geoback.case.loading import LoadedCase, MeshSettings
+from geoback.case.meshsize import describe_bytes as _bytes
 
 VALIDATE_MESH_DOFS = 50_000  # measured cold (gmsh included): 33 k DOFs 2.2 s 260 MB, 73 k DOFs 4.7 s 440 MB
 
@@ -27,14 +28,14 @@ def check_case(loaded: LoadedCase) -> str:
     GeobackError (located when it is the case's fault); a CaseError carries every problem of the
     readings found (``CaseError.problems``)."""
     from geoback.inference.identification import prepare
-    from geoback.case.meshsize import mesh_inputs
-    from geoback.case.meshsize import estimate
+    from geoback.case.meshsize import Work, estimate, mesh_inputs
     from geoback.observation.readings import readings_report, require_readings
 
     case = loaded.case
     report = readings_report(loaded)  # every readings problem at once, before meshing
     require_readings(loaded, report)  # what `run` refuses before fitting, validate refuses too (issue 23)
-    est = estimate(mesh_inputs(case))
+    work = Work.of(case)
+    est = estimate(mesh_inputs(case), work)
     name = loaded.path if loaded.path is not None else case.name
     if est.dofs <= VALIDATE_MESH_DOFS:
         analysis = prepare(loaded)
@@ -47,4 +48,14 @@ def check_case(loaded: LoadedCase) -> str:
     read = sum(n.count for n in report.notes)
     matched = "".join(f"\n  {n.text()}" for n in report.notes)
     return (f"{name}: valid ({len(case.instruments)} instruments, {read} readings, "
-            f"{len(case.parameters)} parameters, {mesh_text}){matched}{warned}")
+            f"{len(case.parameters)} parameters, {mesh_text}){matched}{warned}\n{cost_text(est)}")
+
+
+def cost_text(est) -> str:
+    """What `run` will cost: 'run: ~210 MB at most; Mohr-Coulomb ground: up to 10 load increments ...'."""
+    work = est.work
+    check = ""
+    if est.fine_dofs is not None:
+        check = (f" (its discretisation-error check skipped: {est.check_skipped})" if est.check_skipped else
+                 f" (with its discretisation-error check on a mesh twice as fine, about {est.fine_dofs:,.0f} DOFs)")
+    return f"cost of `geoback run`: ~{_bytes(est.run_bytes)} of memory at most{check}; {work.describe(est.dofs)}"

@@ -5,9 +5,13 @@ taken in internal coordinates z = q / scale, with q = ln p for log-transformed p
 scale the initial magnitude, so that the paper's mu0 = 10 means the same whatever the units:
 'lm' adds mu * mean(diag N) * I to N = B^t B (eqn 30), 'lm-scaled' adds mu * diag(N) (Marquardt),
 'gn' uses mu = 0 (eqn 28) with step halving. mu is multiplied by 10 when J rises and divided by
-10 when it falls; a step is accepted only if J decreases. A trial point where the model cannot be
-solved (``errors.ForwardFailure``: a non-linear forward run that did not converge) counts as a rise
-of J (recorded as J = inf in the history); at the initial values it is an error. When the
+10 when it falls; a step is accepted only if J decreases and the sensitivities there are computed
+too. A trial point where the model cannot be solved (``errors.ForwardFailure``: a non-linear
+forward run that did not converge), for its readings or for their sensitivities, counts as a rise
+of J (recorded as J = inf in the history; the latter also as a 'model-unsolved' warning): the fit
+goes on from its best point, never lost; at the initial values it is an error. Past the time limit
+of ``case.budget`` the fit stops with its best accepted point (status 'not converged', a
+'time-limit' warning; ``Fit.warnings``). When the
 simulation's readings are only piecewise smooth in the parameters (``Simulation.piecewise_smooth``:
 elastoplastic ground, whose J has a kink wherever a quadrature point starts to yield in another load
 increment), the gradient does not vanish at the minimum; the fit then also stops after two accepted
@@ -28,12 +32,18 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from geoback.errors import ForwardFailure
+from geoback.case import budget
+from geoback.errors import ForwardFailure, TimeLimit
 from geoback.inference.frozen import readonly
 from geoback.inference.misfit import Misfit
 from geoback.inference.parameters import ParameterSet
 
 MAX_TRIALS = 12  # trial steps per iteration (mu x10 or step halving each time)
+WARNINGS = {  # codes of Fit.warnings (caveat codes of the result)
+    "time-limit": "the fit was stopped at the time limit (geoback.case.budget, --time-limit) with its best point",
+    "model-unsolved": "a point that lowered J had no solution with its sensitivities: rejected, the fit kept the "
+                      "best point where the model could be solved",
+}
 PIECEWISE_TOL = 1e-2  # J units: smaller falls of J are not meaningful when the readings have kinks
 MAX_SETTLE = 8  # refits from the optimum while the misfit's anchored settings change
 METHODS = ("lm", "gn", "lm-scaled")
@@ -84,6 +94,8 @@ class Fit:
     - ``iterations``: iterations made (over all refits from the optimum while the misfit settled).
     - ``at_bound``: which parameters ended on a bound.
     - ``moved``: False when stuck at the initial values (no step decreased J, yet J was not at a minimum).
+    - ``warnings``: (code, message) pairs (``WARNINGS``): the fit was stopped at the time limit, or a point
+      that lowered J could not be solved for its sensitivities and the fit kept the best point that could.
     """
 
     p: np.ndarray
@@ -97,9 +109,11 @@ class Fit:
     iterations: int
     at_bound: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     moved: bool = True  # False: stuck at the initial values (no step decreased J, yet J was not at a minimum)
+    warnings: tuple = ()  # (code, message): what the result should be read with (WARNINGS)
 
     def __post_init__(self):
         object.__setattr__(self, "history", tuple(self.history))
+        object.__setattr__(self, "warnings", tuple(self.warnings))
         for name in ("p", "x", "A", "at_bound"):
             object.__setattr__(self, name, readonly(getattr(self, name)))
 
@@ -153,7 +167,10 @@ def fit(misfit: Misfit, settings: Settings = Settings(), method: str | None = No
         again = _iterate(misfit, warm, method, result.p, max_iterations, shown)
         result = replace(again, history=result.history + tuple(replace(h, k=h.k + result.iterations)
                                                                for h in again.history),
-                         iterations=again.iterations + result.iterations, moved=again.moved or result.moved)
+                         iterations=again.iterations + result.iterations, moved=again.moved or result.moved,
+                         warnings=tuple({**dict(result.warnings), **dict(again.warnings)}.items()))
+        if "time-limit" in dict(again.warnings):
+            break
     return result
 
 
@@ -189,7 +206,20 @@ def _iterate(misfit: Misfit, settings: Settings, method: str | None, p0: np.ndar
 
     floor = PIECEWISE_TOL if getattr(misfit.simulation, "piecewise_smooth", False) else 0.0
     small = 0  # accepted steps in a row that lowered J by less than the floor
+    warnings: dict = {}
+    unsolved = []  # J at points that lowered it but had no solution with sensitivities
+
+    def out_of_time(where: str) -> bool:
+        if not budget.expired(where):
+            return False
+        warnings["time-limit"] = (f"the fit was stopped at {budget.describe_limit()} in iteration {k} with the best "
+                                  f"point it had reached (J = {J:.6g}); it had not converged")
+        return True
+
     while k < max_iterations:
+        if out_of_time(f"iteration {k + 1} of the fit"):
+            status, reason = "not converged", f"stopped at {budget.describe_limit()}: the estimate is the best point reached"
+            break
         k += 1
         N, g = B.T @ B, B.T @ ev.r
         step = _solve_step(N, g, damping(N))
@@ -199,14 +229,28 @@ def _iterate(misfit: Misfit, settings: Settings, method: str | None, p0: np.ndar
             status, reason = "converged", f"predicted decrease of J ({predicted:.1e}) below tolerance"
             moved = True  # at the minimum already: nowhere to move
             break
-        accepted = False
+        accepted, stopped = False, False
         for _trial in range(MAX_TRIALS):
+            if _trial and out_of_time(f"trial {_trial + 1} of iteration {k} of the fit"):
+                stopped = True
+                break
             z_new = np.clip(z + step, lo, hi)
             p_new = co.p(z_new)
+            ev_new = None
             try:
                 J_new = misfit.J(p_new)
+                if J_new < J:  # a point that lowers J: accepted once its sensitivities are known too
+                    try:
+                        ev_new = misfit.evaluate(p_new, jacobian=True)
+                    except ForwardFailure:
+                        unsolved.append(J_new)
+                        J_new = np.inf
             except ForwardFailure:  # the model cannot be solved there (a non-linear run failed): a rejected step
                 J_new = np.inf
+            except TimeLimit:  # the time limit passed inside a forward run: stop with the best point
+                out_of_time(f"trial {_trial + 1} of iteration {k} of the fit")
+                stopped = True
+                break
             accepted = J_new < J
             history.append(Iteration(k, mu, J_new, p_new, accepted))
             if progress:
@@ -218,6 +262,9 @@ def _iterate(misfit: Misfit, settings: Settings, method: str | None, p0: np.ndar
             else:
                 mu *= 10
                 step = _solve_step(N, g, damping(N))
+        if stopped:
+            status, reason = "not converged", f"stopped at {budget.describe_limit()}: the estimate is the best point reached"
+            break
         if not accepted:
             if moved:
                 status, reason = "converged", "no step decreases J any more (minimum to working precision)"
@@ -231,7 +278,7 @@ def _iterate(misfit: Misfit, settings: Settings, method: str | None, p0: np.ndar
         z, J = z_new, J_new
         if method != "gn":
             mu /= 10
-        ev = misfit.evaluate(co.p(z), jacobian=True)
+        ev = ev_new
         B = ev.B * co.dp_dz(z)
         rel_step = np.max(np.abs(dz) / np.maximum(np.abs(z), 1e-12))
         if rel_step < settings.step_tol:
@@ -249,4 +296,9 @@ def _iterate(misfit: Misfit, settings: Settings, method: str | None, p0: np.ndar
     at_bound = (np.isclose(z, lo) & np.isfinite(lo)) | (np.isclose(z, hi) & np.isfinite(hi))
     if status == "converged" and at_bound.any():
         reason += "; at a bound: " + ", ".join(n for n, b in zip(params.names, at_bound) if b)
-    return Fit(ev.p, ev.J, ev.x, ev.A, history, status, reason, method, k, at_bound, moved)
+    if unsolved:
+        warnings["model-unsolved"] = (
+            f"the model had no solution with its sensitivities at {len(unsolved)} point(s) that lowered J (to "
+            f"{min(unsolved):.6g}): they were rejected steps, and the estimate is the best point where it could be "
+            f"solved (J = {ev.J:.6g})")
+    return Fit(ev.p, ev.J, ev.x, ev.A, history, status, reason, method, k, at_bound, moved, tuple(warnings.items()))

@@ -6,6 +6,12 @@ on each reading (most of it: the finer mesh's own error is smaller by about refi
 elements). It is compared with each reading's standard deviation: above WARN = 0.3 sigma the
 estimate may be biased by the mesh, and the case can either be meshed finer or have the error
 added to C_x as an independent error of variance d^2 (``fit: {mesh_error: include}``).
+
+The check is skipped, and says why, rather than lose the fit: when the finer mesh is too large
+(``MAX_FINE_DOFS``; for staged and Mohr-Coulomb ground, more memory than the size limit allows:
+``meshsize.check_fits``), when the time limit has passed (``geoback.case.budget``), or when the model has
+no solution on the finer mesh (a Mohr-Coulomb run that does not converge there: the fit at the
+estimate stands; it was lost with exit code 2 before).
 """
 from __future__ import annotations
 
@@ -58,24 +64,41 @@ class MeshError:
 
 def discretisation_error(analysis, misfit, p: np.ndarray, refine: float = 2.0) -> MeshError:
     """The readings at p on a mesh `refine` times finer than the analysis' (see the module docstring)."""
-    from geoback.case.meshsize import mesh_inputs
-    from geoback.case.meshsize import estimate
-    from geoback.case.meshsize import refined_case
+    from geoback.case import budget
+    from geoback.case.meshsize import Work, check_fits, estimate, mesh_inputs, refined_case
+    from geoback.errors import ForwardFailure, TimeLimit
     from geoback.physics.factory import make_simulation
 
     sim = analysis.simulation
     fine_case = refined_case(analysis.case, refine)
     fine_dofs = int(estimate(mesh_inputs(fine_case)).dofs)
     labels = tuple(misfit.data.labels)
+
+    def skipped(why: str) -> MeshError:
+        return MeshError(refine, sim.dofs, fine_dofs, np.zeros(0), np.zeros(0), 0.0, labels, why)
+
+    work = Work.of(analysis.case)
     if fine_dofs > MAX_FINE_DOFS:
-        return MeshError(refine, sim.dofs, fine_dofs, np.zeros(0), np.zeros(0), 0.0, labels,
-                         f"the mesh {refine:g} times finer would have about {fine_dofs:,} DOFs "
-                         f"(more than {MAX_FINE_DOFS:,})")
-    fine = make_simulation(analysis.loaded.with_case(fine_case), blocks=list(sim.survey.blocks),
-                           backend=getattr(sim, "backend", None))
+        return skipped(f"the mesh {refine:g} times finer would have about {fine_dofs:,} DOFs (more than {MAX_FINE_DOFS:,})")
+    if work.physics != "elastic" and check_fits(work, fine_dofs, analysis.case.mesh.order):
+        return skipped(check_fits(work, fine_dofs, analysis.case.mesh.order))
+    if budget.expired("the discretisation-error check"):
+        return skipped(f"{budget.describe_limit()} was reached")
     values = misfit.values(p)
-    d = fine.predict(values).x - sim.predict(values).x
-    fine.release()
+    fine = None
+    budget.say(f"discretisation error: the readings at the estimate on the mesh {refine:g} times finer "
+               f"(about {fine_dofs:,} DOFs)")
+    try:
+        fine = make_simulation(analysis.loaded.with_case(fine_case), blocks=list(sim.survey.blocks),
+                               backend=getattr(sim, "backend", None))
+        d = fine.predict(values).x - sim.predict(values).x
+    except ForwardFailure as exc:  # the finer model has no solution there (Mohr-Coulomb): the fit is kept
+        return skipped(f"the model could not be solved on the mesh {refine:g} times finer ({exc})")
+    except TimeLimit:
+        return skipped(f"{budget.describe_limit()} was reached in its run on the mesh {refine:g} times finer")
+    finally:
+        if fine is not None:
+            fine.release()
     sigma = np.sqrt(np.diag(misfit.data.covariance))
     full = misfit if misfit.weighting == "full" else misfit.with_weighting("full")
     wn = float(np.linalg.norm(full.whiten(d)))

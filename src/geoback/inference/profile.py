@@ -4,13 +4,17 @@ J, minimised over the others, rises by chi^2_1(95 %) = 3.84 above its minimum.
 Used where the linearised interval of eqn (55) is not reliable: a large coefficient of variation, an
 interval that crosses a bound or the physically allowed range, or an objective that is far from
 quadratic along the parameter; or when asked for. Each point of a profile is a fit of the other
-parameters (their factorisations reused), so a profile costs a few dozen fast fits.
+parameters (their factorisations reused), so a profile costs a few dozen fast fits. Where the model
+has no solution (a Mohr-Coulomb run that does not converge) the end is open, at the parameter's
+limit; once the time limit has passed (``geoback.case.budget``) an end not yet found is the linearised one.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy import optimize
 
+from geoback.case import budget
+from geoback.errors import ForwardFailure
 from geoback.inference.estimate import Settings, fit
 
 CHI2_1_95 = 3.841458820694124
@@ -60,12 +64,19 @@ def profile_interval(misfit, settings: Settings, p_hat: np.ndarray, J_min: float
             at = (lambda t: x0 + sign * half * t)
         inside, end = x0, None
         for k in range(MAX_STEPS):
+            if budget.expired("a profile-likelihood interval"):  # the linearised end: the best there is now
+                end = float(np.clip(x0 + sign * half, min(lo_limit, hi_limit), max(lo_limit, hi_limit)))
+                break
             v = at(1.5 ** k)
             if (sign < 0 and v <= limit) or (sign > 0 and v >= limit):
                 v = limit
-            if g(v) >= 0:
-                end = optimize.brentq(g, min(inside, v), max(inside, v), xtol=1e-4 * max(abs(x0), 1e-12),
-                                      rtol=1e-6)
+            try:
+                if g(v) >= 0:
+                    end = optimize.brentq(g, min(inside, v), max(inside, v), xtol=1e-4 * max(abs(x0), 1e-12),
+                                          rtol=1e-6)
+                    break
+            except ForwardFailure:  # no solution at v (or between): the profile did not see the readings bound
+                end = limit  # it there; the end is open (at its limit) rather than a bound it did not see
                 break
             inside = v
             if v == limit:
@@ -73,3 +84,4 @@ def profile_interval(misfit, settings: Settings, p_hat: np.ndarray, J_min: float
                 break
         ends.append(end if end is not None else inside)
     return ends[0], ends[1]
+

@@ -93,10 +93,10 @@ def build_mesh(case: Case, use_cache: bool = True, allow_large: bool = False) ->
     the default size limit (geoback.case.meshsize.max_dofs()), unless `allow_large`.
     """
     from geoback.errors import GeobackError
-    from geoback.case.meshsize import size_problem
+    from geoback.case.meshsize import Work, size_problem
 
     inputs = mesh_inputs(case)
-    too_big = size_problem(inputs, allow_large=allow_large)
+    too_big = size_problem(inputs, allow_large=allow_large, work=Work.of(case))
     if too_big:
         raise GeobackError(f"mesh of case '{case.name}': {too_big[1]}")
     key = mesh_key(inputs)

@@ -32,8 +32,15 @@ Newton iteration starts from the last run's solution of that increment when the 
 smaller there than at the previous converged state (warm start: an optimiser's next point is near
 its last); the converged solution is the same to the Newton tolerance either way.
 
-Composition: the case's ``Domain`` (``domain.py``), the quadrature-point operators, and the last run
-with its warm start (``_Runs``), shared with views on other instruments (``Simulation.surveying``:
+The last run whose sensitivities were asked for is kept as well (an optimiser's accepted point: the
+assessment and the outputs ask for it again after rejected trial points, and get it without a new
+run, which could fail where this one converged). A run longer than ``FIRST_WORDS`` seconds says
+where it is (stage k of n, increment, Newton iteration) every ``EVERY`` seconds through
+``case.budget.say``, and stops with ``errors.TimeLimit`` where it is once the command's time limit
+and its grace have passed (``_Watch``, the engine's observer).
+
+Composition: the case's ``Domain`` (``domain.py``), the quadrature-point operators, and the last runs
+with their warm start (``_Runs``), shared with views on other instruments (``Simulation.surveying``:
 nothing survey-dependent is cached, so a view reads the last run without a new one). Names are
 resolved by ``Names`` over the plan, the strength and the ground. Not modelled: a lining on yielding
 ground (refused by the case checks), cross-anisotropic elasticity.
@@ -47,6 +54,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from geoback.case import budget
 from geoback.case.loading import LoadedCase
 from geoback.errors import ForwardFailure, GeobackError
 from geoback.physics.domain import build_domain
@@ -56,11 +64,11 @@ from geoback.physics.mesh import Mesh
 from geoback.physics.names import Names
 from geoback.physics.plastic_zone import PlasticZone, equivalent_plastic_strain, measure
 from geoback.physics.simulation import Field, Prediction, Simulation
-from geoback.case.strength import MC_FIELDS, Strength
+from geoback.case.strength import INCREMENTS, MC_FIELDS, Strength, stage_increments
 
-INCREMENTS = 10  # equal load increments per unit of release
-MIN_STAGE = 2  # increments of a stage at least
 ANTICIPATE = 3  # readings-only runs after a sensitivity request that compute the sensitivities asked last
+FIRST_WORDS = 3.0  # seconds a forward run goes before it says where it is (then every EVERY seconds)
+EVERY = 5.0
 DEG = np.pi / 180
 UNMODELLED = ("n", "m")  # extensions not available with yielding ground (cross-anisotropic elasticity)
 
@@ -96,13 +104,65 @@ class _Run:
 
 
 class _Runs:
-    """The last run, the warm start it offers, and the names asked last (``solution``)."""
+    """The last run, the last run whose sensitivities were asked for (an optimiser's accepted point:
+    asked for again after rejected trials, by the assessment and the outputs, and never solved
+    twice), the warm start they offer, and the names asked last (``solution``)."""
 
     def __init__(self):
         self.run: _Run | None = None
+        self.kept: _Run | None = None  # the last run whose sensitivities were asked for
         self.warm: dict | None = None  # the last run's increments, to start the next one from (plasticity.solve)
         self.wanted: tuple = ()
         self.plain_requests = 0
+        self.number = 0  # runs started (for progress lines)
+
+    def remembered(self, key: tuple, wrt) -> _Run | None:
+        for run in (self.run, self.kept):
+            if run is not None and run.key == key and set(wrt) <= set(run.names):
+                return run
+        return None
+
+
+class _Watch:
+    """A run's progress lines (after FIRST_WORDS seconds, then every EVERY seconds: stage, increment,
+    Newton iteration) and its time limit (``geoback.case.budget``: past it, the run stops where it is)."""
+
+    def __init__(self, number: int, stages: list[str]):
+        self.number, self.stages = number, stages
+        self.t0 = time.monotonic()
+        self.next = self.t0 + FIRST_WORDS
+        self.spoke = False
+        self.at = None
+
+    def where(self) -> str:
+        p = self.at
+        if p is None:
+            return f"forward run {self.number} (Mohr-Coulomb), setting up"
+        return (f"forward run {self.number} (Mohr-Coulomb) at stage {p.stage} of {p.stages} "
+                f"({self.stages[p.stage - 1]}), increment {p.increment} (lambda {p.lam:.4g})"
+                + (f", Newton iteration {p.iteration}" if not p.converged else ""))
+
+    def __call__(self, p) -> None:
+        self.at = p
+        budget.check(self.where)
+        now = time.monotonic()
+        if now >= self.next:
+            self.next = now + EVERY
+            self.spoke = True
+            what = (f"converged in {p.iteration} Newton iteration{'s' if p.iteration != 1 else ''}" if p.converged
+                    else f"Newton iteration {p.iteration}, residual {p.residual:.1e}")
+            halved = f", {p.cutbacks} increment{'s' if p.cutbacks != 1 else ''} halved" if p.cutbacks else ""
+            budget.say(f"  forward run {self.number}: stage {p.stage} of {p.stages} ({self.stages[p.stage - 1]}), "
+                       f"increment {p.increment} (lambda {p.lam:.4g}), {what}{halved}; {now - self.t0:.0f} s",
+                       remember=False)
+
+    def done(self, counters, failed: bool = False) -> None:
+        if self.spoke:
+            c = counters
+            budget.say(f"  forward run {self.number} {'failed' if failed else 'done'}: {c.increments} increments, "
+                       f"{c.newton_iterations} Newton iterations, {c.factorisations} factorisations"
+                       + (f", {c.cutbacks} halved" if c.cutbacks else "")
+                       + f"; {time.monotonic() - self.t0:.0f} s", remember=False)
 
 
 class PlasticSimulation(Simulation):
@@ -144,8 +204,7 @@ class PlasticSimulation(Simulation):
         """Fractions of each stage where increments end: INCREMENTS per unit of release, MIN_STAGE per stage."""
         beta = self.plan.cumulative(self.plan.values)
         steps = np.diff(np.concatenate([[0.0], beta]))
-        return tuple(tuple(np.linspace(0.0, 1.0, max(MIN_STAGE, int(np.ceil(increments * s - 1e-9))) + 1)[1:])
-                     for s in steps)
+        return tuple(tuple(np.linspace(0.0, 1.0, n + 1)[1:]) for n in stage_increments(steps, increments))
 
     # ------------------------------------------------------------------ the inputs of the solver
     def _inputs(self, values: Mapping):
@@ -215,20 +274,25 @@ class PlasticSimulation(Simulation):
         runs = self._runs
         if wrt:
             runs.wanted, runs.plain_requests = tuple(wrt), 0
-        run = runs.run
-        if run is not None and run.key == key and set(wrt) <= set(run.names):
+        run = runs.remembered(key, wrt)
+        if run is not None:
+            if wrt:
+                runs.kept = run
             return run
         names = self._names_to_compute(values, wrt)
         self._check_strength(values)
         mat, sigma0, f, lam = self._inputs(values)
         derivs = self._derivatives(values, names) if names else None
         self.counters.forward_runs += 1
+        runs.number += 1
+        watch = _Watch(runs.number, self.stages)
         try:
             with _one_thread(self._pardiso):
                 res = solve(self.fe, mat, sigma0, f, lam, derivatives=derivs, options=self.options,
-                            operators=self.ops, warm=runs.warm)
+                            operators=self.ops, warm=runs.warm, observer=watch)
         except NonConvergence as exc:
             self._count(exc.counters)
+            watch.done(exc.counters, failed=True)
             raise
         except ValueError as exc:  # the in-situ stress outside the strength at these values
             if "yield condition" in str(exc):
@@ -236,8 +300,11 @@ class PlasticSimulation(Simulation):
                                      f"({exc})") from None
             raise
         self._count(res.counters)
+        watch.done(res.counters)
         runs.warm = res.warm
         runs.run = _Run(key, tuple(names), res.u, res.du_dp, res)
+        if wrt:
+            runs.kept = runs.run
         return runs.run
 
     def _count(self, c) -> None:
@@ -271,8 +338,8 @@ class PlasticSimulation(Simulation):
         return self.solution(values).u
 
     def release(self) -> None:
-        """Forget the last run (and the warm start it offers): the next run starts from scratch."""
-        self._runs.run, self._runs.warm = None, None
+        """Forget the last runs (and the warm start they offer): the next run starts from scratch."""
+        self._runs.run, self._runs.kept, self._runs.warm = None, None, None
 
     def replaying(self, values: Mapping) -> "PlasticSimulation":
         """A copy replaying the increments of the run at `values` (no halving) with a tight Newton

@@ -26,8 +26,14 @@ naming the increment, lambda and the residual - never a silent result. After a q
 convergence (<= ``fast`` iterations) the next increment grows by ``growth``, up to
 ``max_increment`` (fractions of the final lambda). While the state is elastic, the ends of a fixed
 schedule that an elastic step reaches with every point elastic are one increment (the response is
-linear there, so the solution and its sensitivities are the same; ``schedule.elastic_reach``). A
-run may start each increment's Newton iteration from an earlier run's solution of it (``warm``).
+linear there, so the solution and its sensitivities are the same; ``schedule.elastic_reach``),
+solved as that linear step, u += dlambda K_e^-1 f, without Newton (``_Problem.elastic_step``). The
+residual (2) is measured against at least ``LAM_FLOOR`` of the full release: below it the rounding of
+the in-situ stress' internal force exceeds tol |lambda f| (a first release of 1e-6 failed so). A
+singular tangent is a failed Newton iteration (``linear.SingularMatrix``), as is a non-finite
+stress. A run may start each increment's Newton iteration from an earlier run's solution of it
+(``warm``); an ``observer`` sees every Newton iteration and converged increment (``Progress``: the
+progress lines and the time limit of ``plastic.py``).
 
 Direct differentiation (DDM)
 ----------------------------
@@ -102,6 +108,10 @@ from geoback.physics.plasticity.linear import LU, Counters, SingularMatrix
 from geoback.physics.plasticity.schedule import Steps, elastic_reach
 from geoback.physics.plasticity.mohr_coulomb import Material
 from geoback.physics.plasticity.operators import PointOperators
+
+
+LAM_FLOOR = 1e-3  # residuals are measured against at least this fraction of the full release: below it the
+# rounding of the internal force of the in-situ stress (|sigma0| >> its increment) exceeds tol |lambda f|
 
 
 class NonConvergence(ForwardFailure):
@@ -265,6 +275,7 @@ class _Problem:
     def __init__(self, ops, mat, sigma0, f, opts, counters):
         self.ops, self.mat, self.sigma0, self.f, self.opts, self.counters = ops, mat, sigma0, f, opts, counters
         self.f_norm = np.linalg.norm(f)
+        self._w = None  # K_e^-1 f and its strain, once asked (elastic_response)
         with counters.timed("assemble tangent"):
             self.Ke_elastic = ops.element_matrices(mc.elastic_matrix(mat))
             self.K_elastic = ops.assemble(self.Ke_elastic)
@@ -282,13 +293,42 @@ class _Problem:
             Ke = self.ops.element_matrices(C, plastic) - self.Ke_elastic[plastic]
             return self.ops.assemble(Ke, plastic, base=self.K_elastic.data)
 
-    def newton(self, state: _State, lam: float, first: LU, work: LU, start: np.ndarray | None = None) -> _Converged:
+    def elastic_response(self, elastic: LU) -> tuple[np.ndarray, np.ndarray]:
+        """w = K_e^-1 f and its strain at every point (one back-substitution a run)."""
+        if self._w is None:
+            w = elastic.solve(self.f)
+            self._w = (w, self.ops.strain(w))
+        return self._w
+
+    def reference(self, lam: float) -> float:
+        """What the residual (2) is measured against: |lambda| ||f||, at least LAM_FLOOR ||f||."""
+        return max(abs(lam), LAM_FLOOR) * self.f_norm
+
+    def elastic_step(self, state: _State, lam: float, elastic: LU) -> _Converged | None:
+        """The increment state.lam -> lam as one linear step u += (lam - state.lam) K_e^-1 f, for an
+        end every point reaches elastically (``schedule.elastic_reach``): exact, no Newton iteration
+        (whose residual test would be at the mercy of rounding: the internal force of the in-situ
+        stress against a tiny release). None if a point is not elastic after all."""
+        w, w_strain = self.elastic_response(elastic)
+        dlam = lam - state.lam
+        with self.counters.timed("return mapping and tangent"):
+            deps = dlam * w_strain
+            sigma, C, mode = mc.update_with_tangent(state.sigma, deps, self.mat)
+        if np.any(mode != mc.ELASTIC):
+            return None
+        rel = float(np.linalg.norm(self.residual(sigma, lam)) / self.reference(lam))
+        self.counters.elastic_steps += 1
+        return _Converged(state.u + dlam * w, sigma, deps, mode, C, [rel], False)
+
+    def newton(self, state: _State, lam: float, first: LU, work: LU, start: np.ndarray | None = None,
+               observer=None) -> _Converged:
         """Full Newton for the increment state.lam -> lam; the first correction with `first`
         (the converged tangent of the previous state), the next ones refactorise into `work`. It
         starts from the previous state, or from `start` (an earlier run's solution of this
-        increment) when the residual is smaller there."""
+        increment) when the residual is smaller there. `observer(iteration, residual)` is called
+        after every iteration."""
         ops, opts = self.ops, self.opts
-        ref = abs(lam) * self.f_norm
+        ref = self.reference(lam)
         r = self.residual(state.sigma, lam)
         u = state.u.copy()
         lu = first
@@ -306,7 +346,10 @@ class _Problem:
                     C = mc.consistent_tangent(state.sigma, deps, self.mat, mode)
                     return _Converged(u, sigma, deps, mode, C, [rel], False)
         for it in range(1, opts.max_iterations + 1):
-            u += lu.solve(-r)
+            try:
+                u += lu.solve(-r)
+            except SingularMatrix as exc:
+                raise _Failed(residuals, str(exc)) from None
             self.counters.newton_iterations += 1
             with self.counters.timed("return mapping and tangent"):
                 deps = ops.strain(u - state.u)
@@ -314,6 +357,8 @@ class _Problem:
             r = self.residual(sigma, lam)
             rel = float(np.linalg.norm(r) / ref)
             residuals.append(rel)
+            if observer is not None:
+                observer(it, rel)
             if not np.isfinite(rel):
                 raise _Failed(residuals, "residual not finite")
             if rel <= opts.tol:
@@ -351,12 +396,29 @@ def _check(ops: PointOperators, material, sigma0, f, stages, opts: Options):
     return mat, sig0, f, stages
 
 
+@dataclass(frozen=True)
+class Progress:
+    """Where a run is, for an observer (``solve(observer=...)``): after every Newton iteration
+    (`iteration` >= 1, its relative residual) and after every converged increment (`converged`)."""
+
+    stage: int  # 1-based
+    stages: int
+    increment: int  # the attempt's number: converged increments before it + 1
+    lam: float  # lambda at the increment's end
+    iteration: int
+    residual: float
+    converged: bool = False
+    cutbacks: int = 0  # increments halved so far in the run
+
+
 def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = None,
           options: Options | None = None, operators: PointOperators | None = None,
-          warm: dict | None = None) -> Result:
+          warm: dict | None = None, observer=None) -> Result:
     """Release f in increments up to each of `stages`; see the module docstring. `warm`: the
     ``Result.warm`` of an earlier run at nearby values (same schedule): each increment's Newton
-    iteration starts from that run's solution of it when its residual is smaller there."""
+    iteration starts from that run's solution of it when its residual is smaller there.
+    `observer(Progress)`: called after every Newton iteration and converged increment (progress
+    lines, a time limit: an exception it raises ends the run)."""
     opts = options or Options()
     ops = operators or PointOperators(fe)
     counters = Counters()
@@ -382,11 +444,15 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
             steps.stage(i, lam_a, lam_b)
             s = 0.0
             while s < 1.0:
-                if conv_elastic:  # a fixed schedule's ends an elastic step reaches: one increment (exact)
-                    elastic_reach(problem, state, steps, conv)
+                # a fixed schedule's ends an elastic step reaches: one increment, solved exactly without Newton
+                reach = conv_elastic and elastic_reach(problem, state, steps, conv)
                 s_new = steps.next(s)
                 lam = steps.lam(s_new)
                 number = counters.increments + 1
+                watch = None
+                if observer is not None:
+                    def watch(it, rel, _i=i, _n=number, _lam=lam):
+                        observer(Progress(_i + 1, len(stages), _n, _lam, it, rel, False, counters.cutbacks))
 
                 def failure(reason, residuals):
                     last = residuals[-1] if residuals else np.nan
@@ -395,7 +461,9 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
                 if len(logs) >= opts.max_increments:
                     raise failure(f"budget of {opts.max_increments} Newton attempts exhausted", [])
                 try:
-                    res = problem.newton(state, lam, conv, work, (warm or {}).get((i, s_new)))
+                    res = problem.elastic_step(state, lam, conv) if reach else None
+                    if res is None:
+                        res = problem.newton(state, lam, conv, work, (warm or {}).get((i, s_new)), watch)
                 except _Failed as fail:
                     logs.append(IncrementLog(number, i + 1, lam, lam - state.lam, fail.residuals, False,
                                              reason=fail.reason))
@@ -432,6 +500,9 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
                 solved[(i, s_new)] = res.u
                 state, s = new, s_new
                 steps.converged(s_new, len(res.residuals))
+                if observer is not None:
+                    observer(Progress(i + 1, len(stages), number, lam, len(res.residuals), res.residuals[-1], True,
+                                      counters.cutbacks))
             schedule.append(tuple(steps.used))
             lam_a, dlam_a = lam_b, (der.stages[i] if der else None)
             out["u"].append(state.u.copy())

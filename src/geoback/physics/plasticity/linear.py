@@ -32,6 +32,7 @@ class Counters:
     cutbacks: int = 0  # increments halved after a failed Newton
     apex_points: int = 0  # point updates that fell back to the apex (see mohr_coulomb.APEX)
     warm_starts: int = 0  # increments whose Newton iteration started from an earlier run's solution
+    elastic_steps: int = 0  # increments every point reached elastically: one exact linear step, no Newton
     seconds: dict = field(default_factory=lambda: defaultdict(float))
 
     def timed(self, key: str):
@@ -39,7 +40,8 @@ class Counters:
 
     def summary(self) -> dict:
         out = {k: getattr(self, k) for k in ("factorisations", "backsubstitutions", "increments",
-                                               "newton_iterations", "cutbacks", "apex_points", "warm_starts")}
+                                               "newton_iterations", "cutbacks", "apex_points", "warm_starts",
+                                               "elastic_steps")}
         out["seconds"] = {k: round(v, 4) for k, v in self.seconds.items()}
         return out
 
@@ -59,6 +61,10 @@ class SingularMatrix(RuntimeError):
     """The backend could not factorise the matrix (singular to working precision)."""
 
 
+# a SuperLU pivot this small against the largest: the matrix is singular to working precision (a tangent
+# with a mechanism: SuperLU factorised it without a word and its solves were garbage, some printing BLAS
+# errors 'On entry to DTRSV parameter number 6 had an illegal value' on stderr); measured 1e-17 there
+PIVOT = 1e-14
 SMALL = 10000  # below this many unknowns SuperLU factorises unsymmetric tangents as fast as PARDISO
 # The tangent's pattern is symmetric (only its values are not): a minimum-degree ordering of A + A^t with
 # diagonal pivots preferred (threshold partial pivoting at 0.1) fills less than COLAMD; measured on a
@@ -100,12 +106,18 @@ class LU:
         if self.backend not in available_backends():
             raise ValueError(f"solver backend {self.backend!r} is not available ({', '.join(available_backends())})")
         self._A = None
+        if not np.isfinite(A.data).all():  # SuperLU factorises NaN silently and its solves print BLAS errors
+            raise SingularMatrix("the matrix has entries that are not finite numbers")
         with self.counters.timed("factorise"):
             try:
                 if self.backend == "pardiso":
                     self._pardiso(A)
                 else:
                     self._lu = spla.splu(A.tocsc(), **SUPERLU)
+                    pivots = np.abs(self._lu.U.diagonal())
+                    if pivots.size and not pivots.min() > PIVOT * pivots.max():
+                        raise RuntimeError(f"singular to working precision (smallest pivot {pivots.min():.1e} of "
+                                           f"the largest {pivots.max():.1e})")
             except Exception as exc:  # SuperLU: RuntimeError; pypardiso: PyPardisoError
                 raise SingularMatrix(f"{self.backend} could not factorise the matrix: {exc}") from None
         self._A = A
@@ -135,6 +147,8 @@ class LU:
             raise RuntimeError("solve() before factorise()")
         rhs = np.asarray(rhs, float)
         B = rhs.reshape(self.n, -1)
+        if not np.isfinite(B).all():
+            raise SingularMatrix("a right-hand side has entries that are not finite numbers")
         with self.counters.timed("backsubstitute"):
             if self.backend == "pardiso":
                 self._solver.set_phase(33)

@@ -10,8 +10,10 @@ as long as every point stays elastic, so several increments of a fixed schedule 
 solution (and the same sensitivities) as one. The trial stress of an elastic step is linear in
 lambda and the Mohr-Coulomb surface (with its cut-off) is convex, so if the trial at an end is
 admissible everywhere so is every trial before it: the furthest such end of the stage is found by
-bisection with one back-substitution (w = K_e^-1 f) and the ends before it are dropped. The
-schedule a run records (``Result.schedule``) lists the increments it used, so a replay is the same.
+bisection with one back-substitution (w = K_e^-1 f) and the ends before it are dropped; that
+increment is then solved as the linear step it is, without Newton (``_Problem.elastic_step``: a
+Newton test of the residual against a tiny release, beta = 1e-6, was below rounding and failed).
+The schedule a run records (``Result.schedule``) lists the increments it used, so a replay is the same.
 """
 from __future__ import annotations
 
@@ -25,7 +27,7 @@ class Steps:
     (the step, a lambda difference, is carried from stage to stage). A fixed schedule with
     ``refine`` halves a failed increment (the ends still to reach are kept in ``pending``)."""
 
-    def __init__(self, opts: Options, lam_end: float):
+    def __init__(self, opts, lam_end: float):  # opts: incremental.Options
         self.opts, self.lam_end = opts, lam_end
         self.step = opts.first_increment * lam_end
 
@@ -69,26 +71,23 @@ class Steps:
         return None
 
 
-def elastic_reach(problem, state, steps: Steps, elastic) -> None:
+def elastic_reach(problem, state, steps: Steps, elastic) -> bool:
     """Drop the pending ends of this stage before the furthest one an elastic step from `state`
-    reaches with every point elastic (`elastic`: the factorised K_e); see the module docstring."""
+    reaches with every point elastic (`elastic`: the factorised K_e); see the module docstring.
+    True when that end (the next one) is reached so: the increment is then one exact linear step."""
     pending = steps.pending
-    if pending is None or len(pending) < 2:
-        return
-    w = None
+    if pending is None or not pending:
+        return False
+    _, w = problem.elastic_response(elastic)
 
     def admissible(k: int) -> bool:
-        nonlocal w
-        if w is None:
-            w = problem.ops.strain(elastic.solve(problem.f))
         dlam = steps.lam(pending[k]) - state.lam
         trial = mc.trial_stress(state.sigma, dlam * w, problem.mat)
         return bool(np.all(mc.select(trial, problem.mat) == mc.ELASTIC))
 
-    lo, hi = 0, len(pending) - 1  # admissible(lo) assumed; find the last admissible index
-    if not admissible(1):
-        return
-    lo = 1
+    lo, hi = 0, len(pending) - 1  # find the last admissible index
+    if not admissible(0):
+        return False
     while lo < hi:
         mid = (lo + hi + 1) // 2
         if admissible(mid):
@@ -96,3 +95,4 @@ def elastic_reach(problem, state, steps: Steps, elastic) -> None:
         else:
             hi = mid - 1
     del pending[:lo]
+    return True
