@@ -240,10 +240,10 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              time_limit: Optional[str] = _time_limit_option()):
     """Forward run: predicted readings and the field; or study data (--readings-out, --noise)."""
     with _limited(time_limit, _say):
-        _simulate(case, out, vtu, set_, refine, noise, seed, readings_out, as_json, allow_large)
+        _simulate(case, out, vtu, set_, refine, noise, seed, readings_out, as_json, allow_large, plots)
 
 
-def _simulate(case, out, vtu, set_, refine, noise, seed, readings_out, as_json, allow_large):
+def _simulate(case, out, vtu, set_, refine, noise, seed, readings_out, as_json, allow_large, plots=False):
     if seed < 0:
         raise GeobackError(f"--seed: expected a whole number 0 or above, found {seed}")
     out = _check_out(out)
