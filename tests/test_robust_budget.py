@@ -300,9 +300,8 @@ def test_discretisation_check_without_solution_keeps_the_fit(monkeypatch):
     assert "model-unsolved" in {c.code for c in res.caveats}
 
 
-@pytest.mark.xfail(strict=True, reason="caveats.fit_caveats (inference/caveats.py, another helper's) does not yet "
-                   "turn Fit.warnings into caveats: `geoback run` adds them (commands/run.with_fit_warnings), the API's "
-                   "identify() does not")
+@pytest.mark.xfail(strict=True, reason="the library's identify() does not yet turn Fit.warnings into caveats "
+                   "(`geoback run` does: commands/run.with_fit_warnings); open in issue 23")
 def test_identify_reports_the_fit_warnings_as_caveats(monkeypatch):
     from geoback.inference.identification import identify
 
