@@ -8,17 +8,31 @@ import math
 from geoback.case.schema import Case, Geometry, number_text
 
 
-def _inside_ground(g: Geometry, x: float, y: float) -> bool:
+def _span(g) -> tuple[float, float]:
+    """x range of the ground points may lie in (a half-model with openings takes the mirrored side too)."""
+    if isinstance(g, Geometry):
+        return 0.0, g.width
+    return (-g.width, g.width) if g.model == "half" else (-g.width / 2, g.width / 2)
+
+
+def _inside_ground(g, x: float, y: float) -> bool:
     tol = 1e-9 * max(g.width, g.depth)
-    return -tol <= x <= g.width + tol and -g.depth - tol <= y <= tol
+    lo, hi = _span(g)
+    return lo - tol <= x <= hi + tol and -g.depth - tol <= y <= tol
 
 
-def _inside_tunnel(g: Geometry, x: float, y: float) -> bool:
+def _inside_tunnel(g, x: float, y: float) -> bool:
+    """Inside the circular tunnel (with openings, what is excavated depends on the stage: the
+    simulation refuses readings of excavated ground, located)."""
+    if not isinstance(g, Geometry):
+        return False
     return math.hypot(x, y + g.axis_depth) < g.radius * (1 - 1e-6)
 
 
-def _segment_enters_tunnel(g: Geometry, a: tuple, b: tuple) -> bool:
+def _segment_enters_tunnel(g, a: tuple, b: tuple) -> bool:
     """Does the straight segment a-b pass through the excavated tunnel's interior?"""
+    if not isinstance(g, Geometry):
+        return False
     cx, cy = 0.0, -g.axis_depth
     dx, dy = b[0] - a[0], b[1] - a[1]
     n2 = dx * dx + dy * dy
@@ -26,8 +40,9 @@ def _segment_enters_tunnel(g: Geometry, a: tuple, b: tuple) -> bool:
     return math.hypot(a[0] + t * dx - cx, a[1] + t * dy - cy) < g.radius * (1 - 1e-6)
 
 
-def _ground_span(g: Geometry) -> str:
-    return f"x between 0 and {number_text(g.width)}, y between {number_text(-g.depth)} and 0"
+def _ground_span(g) -> str:
+    lo, hi = _span(g)
+    return f"x between {number_text(lo)} and {number_text(hi)}, y between {number_text(-g.depth)} and 0"
 
 
 def _tunnel_text(g: Geometry) -> str:
@@ -57,8 +72,8 @@ def _instrument_problems(g: Geometry, i: int, ins, at: tuple | None = None) -> l
             if why:
                 out.append((at + ("points", j), why))
     elif ins.kind == "inclinometer":
-        if not -1e-9 * g.width <= ins.x <= g.width * (1 + 1e-9):
-            out.append((at + ("x",), f"expected the borehole inside the ground (x between 0 and {number_text(g.width)}), "
+        if not _inside_ground(g, ins.x, 0.0):
+            out.append((at + ("x",), f"expected the borehole inside the ground ({_ground_span(g)}), "
                                      f"found x {number_text(ins.x)}"))
         elif ins.toe_depth <= ins.head_depth:
             out.append((at + ("toe_depth",), f"expected the toe deeper than the head (head_depth "
@@ -148,6 +163,8 @@ def physical_problems(case: Case, allow_large: bool = False) -> list[tuple[tuple
     """Checks pydantic cannot express field by field: (path, message) for each problem. The mesh
     size is estimated (geoback.case.meshsize) and refused beyond the default limit unless `allow_large`."""
     g, problems = case.geometry, []
+    if not isinstance(g, Geometry):
+        return _section_problems(case, allow_large)
     if g.axis_depth - g.radius <= 0:
         problems.append((("geometry", "axis_depth"),
                          f"expected the tunnel below the surface (axis_depth greater than the radius "
@@ -169,6 +186,20 @@ def physical_problems(case: Case, allow_large: bool = False) -> list[tuple[tuple
         problems.append((("geometry", "radius"),
                          f"expected a radius of at least 1e-5 times the model's size ({number_text(1e-5 * max(g.width, g.depth))}), "
                          f"found {number_text(g.radius)}: the mesher cannot resolve a tunnel that small"))
+    problems.extend(_layer_problems(case))
+    for i, layer in enumerate(case.ground.layers):
+        if layer.unit_weight is not None and layer.unit_weight != case.ground.unit_weight:
+            problems.append((("ground", "layers", i, "unit_weight"),
+                             "expected one unit weight (ground.unit_weight) for a circular tunnel's geometry (radius, "
+                             "axis_depth): layers with their own unit weight need the geometry with openings, found "
+                             f"{number_text(layer.unit_weight)}"))
+    problems.extend(_instrument_and_mesh_problems(case, allow_large))
+    problems.extend(_rest_problems(case))
+    return problems
+
+
+def _layer_problems(case: Case) -> list[tuple[tuple, str]]:
+    g, problems = case.geometry, []
     layers = case.ground.layers
     if layers[0].top != 0:
         problems.append((("ground", "layers", 0, "top"),
@@ -195,6 +226,52 @@ def physical_problems(case: Case, allow_large: bool = False) -> list[tuple[tuple
         if layer.K0 is None and case.ground.K0 is None:
             problems.append((("ground", "layers", i, "K0"),
                              "expected a K0 for this layer (or ground.K0 for all layers), found none"))
+    return problems
+
+
+def _section_problems(case: Case, allow_large: bool) -> list[tuple[tuple, str]]:
+    """Checks of a case with openings (``layout.py``, ``sequence.py``) and of what it shares with the
+    circular tunnel (layers, instruments' stations, parameters, forecasts)."""
+    from geoback.case.layout import layout_problems
+    from geoback.case.sequence import sequence_problems
+
+    g, problems = case.geometry, []
+    for field, value in (("width", g.width), ("depth", g.depth)):
+        if value > MAX_SIZE:
+            problems.append((("geometry", field), f"expected at most {MAX_SIZE:g} m (lengths are in metres), "
+                                                  f"found {field} {number_text(value)}"))
+    problems.extend(_layer_problems(case))
+    for i, layer in enumerate(case.ground.layers):
+        if layer.model != "linear-elastic":
+            problems.append((("ground", "layers", i, "model"),
+                             f"expected linear-elastic ground with openings (mohr-coulomb ground is modelled for the "
+                             f"circular tunnel's geometry only, so far), found {layer.model}"))
+    if problems:
+        return problems
+    problems.extend(layout_problems(case))
+    if problems:
+        return problems
+    problems.extend(sequence_problems(case))
+    inames = [ins.name for ins in case.instruments]
+    for i, n in enumerate(inames):
+        if inames.index(n) != i:
+            problems.append((("instruments", i, "name"),
+                             f"expected unique instrument names, found '{n}' again (as in instruments[{inames.index(n)}])"))
+    for i, ins in enumerate(case.instruments):
+        problems.extend(_instrument_problems(g, i, ins))
+        if ins.kind in ("inclinometer", "sliding_micrometer", "extensometer", "deflectometer"):
+            n, field = _station_count(ins)
+            if n > MAX_STATIONS:
+                problems.append((("instruments", i, field), f"expected at most {MAX_STATIONS} stations, found {n}"))
+        bad = _covariance_problem(ins)
+        if bad:
+            problems.append((("instruments", i, bad[0]), bad[1]))
+    problems.extend(_rest_problems(case, construction=False))
+    return problems
+
+
+def _instrument_and_mesh_problems(case: Case, allow_large: bool) -> list[tuple[tuple, str]]:
+    g, problems = case.geometry, []
     inames = [ins.name for ins in case.instruments]
     for i, n in enumerate(inames):
         if inames.index(n) != i:
@@ -230,6 +307,12 @@ def physical_problems(case: Case, allow_large: bool = False) -> list[tuple[tuple
     big = mesh_size_problem(case, allow_large)
     if big:
         problems.append(big)
+    return problems
+
+
+def _rest_problems(case: Case, construction: bool = True) -> list[tuple[tuple, str]]:
+    """Parameters, strength, construction (circular), error scales, forecasts and the design."""
+    problems = []
     for i, p in enumerate(case.parameters):
         if p.bounds is not None:
             lo, hi = p.bounds
@@ -250,7 +333,8 @@ def physical_problems(case: Case, allow_large: bool = False) -> list[tuple[tuple
     from geoback.case.strength import strength_problems
 
     problems.extend(strength_problems(case))
-    problems.extend(construction_problems(case))
+    if construction:
+        problems.extend(construction_problems(case))
     pnames = [p.name for p in case.parameters]
     for i, n in enumerate(pnames):
         if pnames.index(n) != i:

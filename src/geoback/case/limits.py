@@ -32,6 +32,7 @@ COHESION = Limits(0.0, 1e6, (0.0, 500.0))
 FRICTION = Limits(0.01, 69.99, (15.0, 45.0))  # the schema takes 0 < phi < 70
 DILATION = Limits(0.0, 69.99, (0.0, 20.0))  # and psi <= phi (strength.py)
 TENSION = Limits(0.0, 1e6, (0.0, 500.0))
+UNIT_WEIGHT = Limits(0.1, 100.0, (12.0, 27.0))  # kN/m3: of soil and rock
 RELEASE = Limits(1e-3, 1.0, (0.05, 1.0))  # a fraction of the in-situ wall stress released (beta): at most all of it
 
 # The unit and range of every named quantity of a case, by its stem (E[clay], E[shotcrete], c[marl],
@@ -41,5 +42,5 @@ RELEASE = Limits(1e-3, 1.0, (0.05, 1.0))  # a fraction of the in-situ wall stres
 QUANTITIES: dict[str, tuple[str, Limits]] = {
     "E": ("kPa", MODULUS), "nu": ("-", POISSON), "K0": ("-", EARTH_PRESSURE),
     "c": ("kPa", COHESION), "phi": ("deg", FRICTION), "psi": ("deg", DILATION), "tension": ("kPa", TENSION),
-    "beta": ("-", RELEASE),
+    "beta": ("-", RELEASE), "gamma": ("kN/m3", UNIT_WEIGHT),
 }

@@ -135,6 +135,74 @@ class Geometry(Strict):
     depth: PositiveLength = Field(description="depth of the model's bottom boundary below the surface [m]")
 
 
+class _Opening(Strict):
+    """An opening: a named region of the ground that construction excavates, whole or in parts."""
+
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$", description="opening name (stages excavate it by name)")
+    cuts: list[tuple[Point, Point]] = Field(
+        default_factory=list, description="straight cut lines [[x1, y1], [x2, y2]] dividing the opening into parts "
+                                          "(each line crosses the opening from side to side)")
+    parts: list["Part"] = Field(default_factory=list, description="the pieces the cuts make, each named by a point "
+                                                                  "inside it (none: the opening is excavated whole)")
+
+
+class Part(Strict):
+    """A named piece of an opening (top heading, bench, invert, side drift), found by a point inside it."""
+
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$", description="part name (stages excavate it by name)")
+    contains: Point = Field(description="a point [x, y] inside the part [m]")
+
+
+class CircleOpening(_Opening):
+    shape: Literal["circle"]
+    centre: Point = Field(description="centre [x, y] [m]")
+    radius: PositiveLength = Field(description="radius [m]")
+
+
+class HorseshoeOpening(_Opening):
+    """The horseshoe (NATM) profile: a crown semicircle (radius `crown_radius`, centre `centre` on the
+    springline), side walls curving in below it (arcs of radius `side_radius` >= crown_radius, tangent to
+    the crown at the springline, their centres on the springline) down to the invert corners, and an
+    invert arc of radius `invert_radius` between the corners (flat without it). `height` is from the
+    invert's lowest point to the crown. The width is 2 x crown_radius, at the springline."""
+
+    shape: Literal["horseshoe"]
+    centre: Point = Field(description="centre of the crown arc [x, y] [m], on the springline")
+    crown_radius: PositiveLength = Field(description="radius of the crown arc [m] (half the width)")
+    side_radius: PositiveLength = Field(description="radius of the side walls [m], at least the crown radius")
+    height: PositiveLength = Field(description="height from the invert's lowest point to the crown [m]")
+    invert_radius: Optional[PositiveLength] = Field(None, description="radius of the invert arc [m] (default: a "
+                                                                      "flat invert)")
+
+
+class ArcThrough(Strict):
+    through: Point = Field(description="a point [x, y] the circular arc between the neighbouring vertices passes through")
+
+
+class PolygonOpening(_Opening):
+    shape: Literal["polygon"]
+    boundary: list[Union[Point, ArcThrough]] = Field(
+        min_length=3, description="vertices [x, y] in order around the opening; between two vertices an entry "
+                                  "{through: [x, y]} makes the side a circular arc through that point")
+
+
+Opening = Annotated[Union[CircleOpening, HorseshoeOpening, PolygonOpening], Field(discriminator="shape")]
+
+
+class Layout(Strict):
+    """The general section: a full model (x from -width/2 to width/2) or a half-model with symmetry at
+    x = 0 (x from 0 to width), ground surface y = 0, bottom y = -depth, and openings of any shape."""
+
+    model: Literal["full", "half"] = Field(description="'full': the whole section; 'half': symmetric about x = 0")
+    width: PositiveLength = Field(description="full model: total width; half-model: symmetry axis to far side [m]")
+    depth: PositiveLength = Field(description="depth of the model's bottom boundary below the surface [m]")
+    openings: list[Opening] = Field(min_length=1, description="the openings (tunnels, shafts, galleries)")
+
+
+def _geometry_shape(value: Any) -> str:
+    return "layout" if isinstance(value, dict) and "openings" in value else "circular"
+
+
 GROUND_MODELS = ("linear-elastic", "mohr-coulomb")
 MC_FIELDS = ("c", "phi", "psi", "tension")  # the strength of a mohr-coulomb layer
 Angle = Annotated[float, BeforeValidator(_number)]
@@ -146,6 +214,8 @@ class Layer(Strict):
     E: Stress = Field(gt=0, description="Young's modulus [kPa] (or '10 MPa')")
     nu: Num = Field(ge=0.0, lt=0.5, description="Poisson's ratio, 0 <= nu < 0.5")
     K0: Optional[Positive] = Field(None, description="coefficient of earth pressure at rest of this layer")
+    unit_weight: Optional[Positive] = Field(None, description="unit weight of this layer [kN/m3] (default: the "
+                                                              "ground's); with openings: geometry only")
     model: Literal["linear-elastic", "mohr-coulomb"] = Field(
         "linear-elastic", description="'linear-elastic', or 'mohr-coulomb': elastic-perfectly plastic with the strength "
                                       "c, phi, dilation psi and an optional tension cut-off")
@@ -446,22 +516,41 @@ class Lining(Strict):
         2, description="quadratic elements through the lining's thickness (bending needs at least 2)")
 
 
+class PlacedLining(Lining):
+    """A lining of an opening of any shape (geometry with openings): a band of its real thickness inside
+    the wall of an opening or of a part (`on`), or along a part's cut lines (`side: cut`, a temporary
+    invert), meshed with the ground and activated stress-free by the stage that installs it."""
+
+    on: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$", description="the opening or part whose wall it lines")
+    side: Literal["wall", "cut"] = Field("wall", description="'wall': along the opening's wall within `on`; 'cut': "
+                                                            "along the cut lines of the part `on` (a temporary invert)")
+
+
 class Stage(Strict):
     """One construction step. In a stage the lining named by `install` is placed first (stress-free,
     on the wall as it has moved so far), then the in-situ stress on the tunnel wall is released up to
-    the cumulative fraction `release`."""
+    the cumulative fraction `release`. With openings (geometry with `openings`): the parts or openings
+    in `excavate` and the linings in `remove` are removed first, the linings in `install` placed, then
+    `release` (default 1) is the cumulative fraction of the removed elements' load released."""
 
     name: StageName = Field(description="stage name (readings are tagged with it)")
     release: Optional[Annotated[float, BeforeValidator(_number), Field(gt=0.0, le=1.0)]] = Field(
         None, description="cumulative fraction of the in-situ stress on the tunnel wall released by the end of "
                           "this stage (beta_k, 0 < beta <= 1, increasing from stage to stage)")
-    install: Optional[str] = Field(None, description="name of the lining installed at the start of this stage")
+    install: Optional[Union[str, list[str]]] = Field(None, description="name(s) of the lining(s) installed at the "
+                                                                      "start of this stage")
+    excavate: Optional[list[str]] = Field(None, description="with openings: parts or openings excavated (their "
+                                                            "elements removed) in this stage")
+    remove: Optional[list[str]] = Field(None, description="with openings: linings removed in this stage (a "
+                                                          "temporary invert)")
 
 
 class Construction(Strict):
     """Staged construction (convergence-confinement): stress released in steps, a lining between them."""
 
     lining: Optional[Lining] = Field(None, description="the lining (installed by a stage's 'install')")
+    linings: Optional[list[PlacedLining]] = Field(None, description="with openings: the linings, each placed on an "
+                                                                    "opening's or a part's wall")
     stages: list[Stage] = Field(min_length=1, description="construction stages in order")
 
 
@@ -571,7 +660,8 @@ class Output(Strict):
 class Case(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_\-.]+$")
     description: str = ""
-    geometry: Geometry
+    geometry: Annotated[Union[Annotated[Geometry, Tag("circular")], Annotated[Layout, Tag("layout")]],
+                        Discriminator(_geometry_shape)]
     ground: Ground
     mesh: MeshSettings = MeshSettings()
     instruments: list[Instrument] = Field(default_factory=list)

@@ -236,9 +236,25 @@ def build_block(ins, loaded: LoadedCase, index: int) -> InstrumentBlock:
                            reference_end=ins.reference if kind == "inclinometer" else "reference end")
 
 
-def check_inside(case: Case, blocks: list[InstrumentBlock], loaded: LoadedCase) -> None:
-    """Reject instrument points outside the ground or inside the excavated tunnel."""
+def mirrored(block: InstrumentBlock) -> InstrumentBlock:
+    """A block of a half-model with points on the other side of the symmetry axis (x < 0) read at their
+    mirror images: u_x(-x, y) = -u_x(x, y), u_y(-x, y) = u_y(x, y) (the model is symmetric)."""
+    left = block.points[:, 0] < 0
+    if not left.any():
+        return block
+    points = block.points.copy()
+    points[left, 0] *= -1
+    weights = block.weights.copy()
+    weights[:, left, 0] *= -1
+    return replace(block, points=points, weights=weights)
+
+
+def check_inside(case: Case, blocks: list[InstrumentBlock], loaded: LoadedCase) -> list[InstrumentBlock]:
+    """Reject instrument points outside the ground or inside the excavated tunnel; with openings in a
+    half-model, points at x < 0 are read at their mirror images (with a notice). Returns the blocks."""
     g = case.geometry
+    if hasattr(g, "openings"):
+        return _check_in_section(g, blocks, loaded)
     tol = 1e-9 * max(g.width, g.depth)
     for b in blocks:
         for j, (x, y) in enumerate(b.points):
@@ -261,8 +277,31 @@ def case_blocks(loaded: LoadedCase) -> list[InstrumentBlock]:
     if not case.instruments:
         raise loaded.error(("instruments",), "the case has no instruments: add at least one (see `geoback schema`)")
     blocks = [build_block(ins, loaded, i) for i, ins in enumerate(case.instruments)]
-    check_inside(case, blocks, loaded)
-    return blocks
+    return check_inside(case, blocks, loaded) or blocks
+
+
+def _check_in_section(g, blocks: list[InstrumentBlock], loaded: LoadedCase) -> list[InstrumentBlock]:
+    """Points inside the section's box (what is excavated depends on the stage: the simulation refuses
+    readings of excavated ground); in a half-model, points at x < 0 mirrored with a notice."""
+    import sys
+
+    half = g.model == "half"
+    lo, hi = (-g.width, g.width) if half else (-g.width / 2, g.width / 2)
+    tol = 1e-9 * max(g.width, g.depth)
+    out = []
+    for b in blocks:
+        for j, (x, y) in enumerate(b.points):
+            if not (lo - tol <= x <= hi + tol and -g.depth - tol <= y <= tol):
+                what = "point" if b.kind in ("points", "convergence") else "station"
+                raise loaded.error(("instruments", b.index), f"{b.kind} '{b.name}': expected every {what} inside the "
+                                                             f"ground (x between {lo:g} and {hi:g} m, y between "
+                                                             f"{-g.depth:g} and 0 m), found {what} {j + 1} at ({x:g}, {y:g})")
+        if half and (b.points[:, 0] < -tol).any():
+            print(f"notice: {b.kind} '{b.name}': points at x < 0 are read at their mirror images (a half-model is "
+                  f"symmetric about x = 0: u_x changes sign)", file=sys.stderr, flush=True)
+            b = mirrored(b)
+        out.append(b)
+    return out
 
 
 def is_instrument_error(name: str) -> bool:

@@ -19,6 +19,8 @@ sensitivities stay exact (complex step, eqns 34-40).
 """
 from __future__ import annotations
 
+from geoback.case.layout import reference_depth
+
 import numpy as np
 
 from geoback.physics.ground import Extension
@@ -47,7 +49,7 @@ def _ratio(attr):
 
 
 def _k0_gradient(f, value, ground, i, values):
-    f.k0 = f.k0 + value * (f.point_depth - ground.case.geometry.axis_depth)
+    f.k0 = f.k0 + value * (f.point_depth - reference_depth(ground.case))
 
 
 def _release(f, value, ground, i, values):

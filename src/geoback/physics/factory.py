@@ -32,7 +32,13 @@ class Implementation:
         return getattr(importlib.import_module(self.module), self.cls)
 
 
+def _has_openings(case) -> bool:
+    return hasattr(case.geometry, "openings")
+
+
 IMPLEMENTATIONS: tuple[Implementation, ...] = (
+    Implementation("excavation", "geoback.physics.excavation", "ExcavationSimulation", _has_openings,
+                   "cases/natm-heading-bench.yaml"),  # openings of any shape, element removal, stages
     Implementation("plastic", "geoback.physics.plastic", "PlasticSimulation", is_plastic,
                    "cases/plastic-tunnel.yaml"),  # a mohr-coulomb layer (stages included)
     Implementation("staged", "geoback.physics.staged", "StagedSimulation",

@@ -47,7 +47,7 @@ class FEModel:
     """Assembled operators of one mesh. Dofs are (ux, uy) per node: dof = 2*node + component."""
 
     def __init__(self, mesh: Mesh, width: float, depth: float, tunnel_centre: tuple[float, float],
-                 radius: float, chunk: int = 40000):
+                 radius: float, chunk: int = 40000, x_min: float = 0.0, priority: np.ndarray | None = None):
         self.mesh = mesh
         self.order = mesh.order
         self.nodes = mesh.nodes
@@ -65,7 +65,9 @@ class FEModel:
         x, y = self.nodes[:, 0], self.nodes[:, 1]
         tol = 1e-9 * max(width, depth)
         fixed = np.zeros(self.ndof, bool)
-        fixed[2 * np.flatnonzero((np.abs(x) < tol) | (np.abs(x - width) < tol))] = True
+        fixed[2 * np.flatnonzero((np.abs(x - x_min) < tol) | (np.abs(x - width) < tol))] = True
+        # which element answers for a point several elements hold (on a boundary): the highest priority
+        self.priority = np.zeros(len(mesh.triangles)) if priority is None else np.asarray(priority, float)
         bottom = np.flatnonzero(np.abs(y + depth) < tol)
         fixed[2 * bottom] = True
         fixed[2 * bottom + 1] = True
@@ -117,7 +119,10 @@ class FEModel:
         self.centroid = coords[:, :3].mean(axis=1)
         self.region = mesh.region
         self._tree = None
-        self._build_wall()
+        if len(mesh.tunnel_edges):
+            self._build_wall()
+        else:
+            self.wall_points = np.zeros((0, 2))
 
     # ------------------------------------------------------------------ assembly
     def _strain_operators(self, sl: slice):
@@ -199,6 +204,26 @@ class FEModel:
         return upper @ u + upper.T @ u - upper.diagonal()[:, None] * u if u.ndim == 2 else \
             upper @ u + upper.T @ u - upper.diagonal() * u
 
+    def element_quadrature(self, elements: np.ndarray):
+        """For the elements listed: strain operators exx, eyy, gxy (n, 2nb, nq) of every local vector
+        shape function at the quadrature points, the weights w (n, nq) (|det J| times the rule's), the
+        shape values N (nb, nq) and the quadrature points' coordinates (n, nq, 2)."""
+        elements = np.asarray(elements, np.int64)
+        coords = self.nodes[self.tri[elements]]
+        inv, det = _geometry(coords, self._dN)
+        dNdx = np.einsum("nrq,eqrx->enxq", self._dN, inv)
+        n, nb, _, nq = dNdx.shape
+        exx = np.zeros((n, 2 * nb, nq))
+        eyy = np.zeros_like(exx)
+        gxy = np.zeros_like(exx)
+        exx[:, 0::2] = dNdx[:, :, 0]
+        eyy[:, 1::2] = dNdx[:, :, 1]
+        gxy[:, 0::2] = dNdx[:, :, 1]
+        gxy[:, 1::2] = dNdx[:, :, 0]
+        N, _ = reference_basis(self.element, self._X)
+        xq = np.einsum("enx,nq->eqx", coords, N)
+        return exx, eyy, gxy, np.abs(det) * self._W, N, xq
+
     # ------------------------------------------------------------------ loads
     def _build_wall(self):
         """Quadrature on the excavated boundary: points, weights, normals, shape values."""
@@ -272,7 +297,8 @@ class FEModel:
             score = lam.min(axis=1)
             better = (score > best) & (elem < 0)
             inside = score >= -tol
-            take = better & inside
+            preferred = (elem >= 0) & (self.priority[e] > self.priority[np.maximum(elem, 0)])
+            take = (better | preferred) & inside
             elem[take], ref[take] = e[take], xi[take]
             best = np.where(better, score, best)
         return elem, ref
