@@ -227,7 +227,8 @@ LINED = dict(stages=[{"name": "heading", "excavate": ["heading"], "release": 0.4
 def lined():
     instruments = points(SURFACE + [[0.0, -8.0], [8.0, -15.0], [-6.0, -20.0]], stage=None)
     ins = [dict(instruments[0], readings={s: [0.0] * 16 for s in ("heading", "heading-lined", "bench", "closed")})]
-    ins.append({"name": "C1", "kind": "convergence", "points": [[-4.9, -15.5], [4.9, -15.5]], "sigma": 0.001,
+    wall = -3.0 + math.sqrt(64.0 - 0.5 ** 2)  # the side wall (radius 8 about (-3, -15)) 0.5 m below the springline
+    ins.append({"name": "C1", "kind": "convergence", "points": [[-wall, -15.5], [wall, -15.5]], "sigma": 0.001,
                 "readings": {"heading": [0.0], "heading-lined": [0.0]}})
     return simulation(natm(instruments=ins, **LINED))
 
@@ -398,3 +399,27 @@ def test_mirrored_readings_in_a_half_model(capsys):
     assert "mirror images" in capsys.readouterr().err
     assert x[0, 1] == pytest.approx(x[1, 1], rel=1e-12) and x[0, 0] == pytest.approx(-x[1, 0], rel=1e-12)
     assert x[2, 0] == pytest.approx(-x[3, 0], rel=1e-12) and x[3, 0] < 0  # the wall moves in
+
+
+@pytest.mark.parametrize("lined_section", [False, True])
+def test_every_part_and_band_is_meshed_with_its_area(lined_section):
+    """The mesh's parts and lining bands cover the layout's polygons (a part the cut lines leave whole, or
+    an OpenCASCADE boolean returning nothing, would otherwise vanish into the ground)."""
+    from geoback.case import layout as lay
+
+    data = natm(**LINED) if lined_section else natm()
+    case = case_from_data(data)
+    sim = simulation(data)
+    mesh, fe = sim.mesh, sim.fe
+    area = fe.element_quadrature(np.arange(fe.ne))[3].sum(axis=1)
+    regions = lay.regions(case.geometry)
+    for k, name in enumerate(mesh.part_names):
+        half = regions[name][1].intersection(lay.ground_polygon(case.geometry)).area
+        assert area[mesh.part == k].sum() == pytest.approx(half, rel=2e-3), name
+    if lined_section:
+        from geoback.case.sequence import Sequence
+
+        for k, (name, ln) in enumerate(Sequence.of(case).linings.items()):
+            band = lay.lining_band(case.geometry, ln).intersection(lay.ground_polygon(case.geometry)).area
+            assert mesh.band_names[k] == name
+            assert area[mesh.band == k].sum() == pytest.approx(band, rel=0.05), name

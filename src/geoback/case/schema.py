@@ -200,7 +200,9 @@ class Layout(Strict):
 
 
 def _geometry_shape(value: Any) -> str:
-    return "layout" if isinstance(value, dict) and "openings" in value else "circular"
+    """Which geometry a value is (a mapping when validating, a model when serialising)."""
+    openings = "openings" in value if isinstance(value, dict) else hasattr(value, "openings")
+    return "layout" if openings else "circular"
 
 
 GROUND_MODELS = ("linear-elastic", "mohr-coulomb")

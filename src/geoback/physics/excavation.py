@@ -133,32 +133,22 @@ class ExcavationSimulation(Simulation):
         return out
 
     def _check_survey(self) -> None:
-        """A reading of ground already excavated at its stage is refused, located."""
-        survey, fe = self.survey, self.fe
-        stage = self.domain.row_stage
-        P = survey.P.tocsr()
-        for r in range(P.shape[0]):
-            cols = P.indices[P.indptr[r]:P.indptr[r + 1]]
-            if not len(cols):
-                continue
-            nodes = np.unique(fe.free[cols] // 2)
-            elems = self._elements_of(nodes)
-            if elems.size and np.all(self.removed_at[elems] <= stage[r]):
-                lab = survey.labels[r]
-                block = next(b for b in survey.blocks if b.name == lab.instrument)
-                raise self.loaded.error(("instruments", block.index),
-                                        f"{block.kind} '{lab.instrument}': expected readings in the ground, found "
-                                        f"a point at ({lab.x:g}, {lab.y:g}) in ground excavated by stage "
-                                        f"'{self.stages[stage[r]]}'")
-
-    def _elements_of(self, nodes: np.ndarray) -> np.ndarray:
-        if not hasattr(self, "_node_elems"):
-            tri = self.fe.tri
-            order = np.argsort(tri.ravel(), kind="stable")
-            self._node_elems = (np.sort(tri.ravel()), order // tri.shape[1])
-        keys, elems = self._node_elems
-        lo, hi = np.searchsorted(keys, nodes, "left"), np.searchsorted(keys, nodes, "right")
-        return np.unique(np.concatenate([elems[a:b] for a, b in zip(lo, hi)])) if len(nodes) else np.zeros(0, int)
+        """A reading of ground already excavated at its stage is refused, located (the point named)."""
+        fe = self.fe
+        stages = list(self.plan.names)
+        for b in self.survey.blocks:
+            elem, _ = fe.locate(b.points)
+            k = stages.index(b.stage)
+            gone = np.flatnonzero((elem >= 0) & (self.removed_at[np.maximum(elem, 0)] <= k))
+            if len(gone):
+                x, y = b.points[gone[0]]
+                stage = stages[int(self.removed_at[elem[gone[0]]])]
+                what = "point" if b.kind in ("points", "convergence") else "station"
+                raise self.loaded.error(("instruments", b.index),
+                                        f"{b.kind} '{b.name}': expected readings of the ground at stage '{b.stage}', "
+                                        f"found {what} {gone[0] + 1} at ({x:g}, {y:g}) in ground excavated by stage "
+                                        f"'{stage}'" + (" (mirrored from x < 0)" if self.loaded.case.geometry.model == "half"
+                                                         else ""))
 
     @property
     def solver(self) -> str | None:
