@@ -199,6 +199,16 @@ def main(argv: list[str] | None = None) -> dict:
                  ("floor least_squares / geoback >= 10x (CPU)", "PASS" if s["cpu"] / g["cpu"] >= 10 else "FAIL")]
     rows.append(("floor factorisations of a forward run = configurations (4)",
                  "PASS" if f["factorisations"] == 4 else "FAIL"))
+    if not args.skip_scipy:  # the same section in one clay layer without linings: every configuration scales
+        plain = with_readings(section(args.scale, lined=False, layers=1))
+        forward(plain), run_geoback(plain)
+        pg, ps = run_geoback(plain), run_scipy(plain)
+        rows += [("one layer, no lining: geoback identify wall / CPU [s]", f"{pg['seconds']:.3f} / {pg['cpu']:.3f}"),
+                 ("  factorisations / solves / forward runs", f"{pg['factorisations']} / {pg['solves']} / {pg['forward_runs']}"),
+                 ("  least_squares wall / CPU [s], factorisations",
+                  f"{ps['seconds']:.2f} / {ps['cpu']:.2f}, {ps['factorisations']}"),
+                 ("  ratio least_squares / geoback (CPU)", round(ps["cpu"] / pg["cpu"], 1)),
+                 ("  floor >= 10x (CPU)", "PASS" if ps["cpu"] / pg["cpu"] >= 10 else "FAIL")]
     if args.large:
         big = with_readings(section(args.large_scale, lined=False, layers=1))
         lf = forward(big)

@@ -41,7 +41,7 @@ from geoback.physics.fem import FEModel
 from geoback.physics.ground import COMPLEX_STEP, Ground, plane_strain_isotropic
 from geoback.physics.names import Names
 from geoback.physics.simulation import Counters, Field, Prediction, Simulation, stage_survey
-from geoback.physics.stiffness import FactorCache
+from geoback.physics.stiffness import FactorCache, proportion
 
 NEVER = 1e9  # removal stage of an element no stage removes
 
@@ -220,6 +220,12 @@ class ExcavationSimulation(Simulation):
     # ------------------------------------------------------------------ configurations
     def _material(self, k: int) -> np.ndarray:
         """Material of every element during stage k's release: -1 off, 0 ground, 1 + i lining i."""
+        cache = self._memo.setdefault("material", {})
+        if k not in cache:
+            cache[k] = self._materials(k)
+        return cache[k]
+
+    def _materials(self, k: int) -> np.ndarray:
         mesh, plan = self.mesh, self.plan
         mat = np.where(self.removed_at <= k, -1, 0)
         names = list(mesh.band_names)
@@ -240,7 +246,15 @@ class ExcavationSimulation(Simulation):
         return out
 
     def _active(self, mat: np.ndarray) -> np.ndarray:
-        """Free dofs (indices into the free numbering) of nodes that active elements hold."""
+        """Free dofs (indices into the free numbering) of nodes that active elements hold (remembered by
+        configuration)."""
+        key = mat.tobytes()
+        cache = self._memo.setdefault("active", {})
+        if key not in cache:
+            cache[key] = self._active_dofs(mat)
+        return cache[key]
+
+    def _active_dofs(self, mat: np.ndarray) -> np.ndarray:
         fe = self.fe
         nodes = np.unique(fe.tri[mat >= 0])
         dofs = np.sort(np.concatenate([2 * nodes, 2 * nodes + 1]))
@@ -383,9 +397,15 @@ class ExcavationSimulation(Simulation):
                     rhs = dg[act].copy()
                     full_step = np.zeros(n)
                     full_step[act] = step_u
+                    real = np.real(coeffs)
                     for j, d in enumerate(dsts):
                         dc = self._coeffs(mat, d)
-                        if np.any(dc):
+                        if not np.any(dc):
+                            continue
+                        alpha = proportion(dc, real)
+                        if alpha is not None:  # dK = alpha K (a modulus scaling the whole configuration): dK du = alpha g
+                            rhs[:, j] -= alpha * g[act]
+                        else:
                             dK = fe.matrix(dc)[act][:, act]
                             rhs[:, j] -= FEModel.symmetric_product(dK.tocsr(), step_u)
                     du[act] += counted_solve(self.counters, fact, s, rhs)
