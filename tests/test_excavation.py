@@ -17,6 +17,7 @@ finite differences:
 from __future__ import annotations
 
 import copy
+import re
 import math
 
 import numpy as np
@@ -423,3 +424,24 @@ def test_every_part_and_band_is_meshed_with_its_area(lined_section):
             band = lay.lining_band(case.geometry, ln).intersection(lay.ground_polygon(case.geometry)).area
             assert mesh.band_names[k] == name
             assert area[mesh.band == k].sum() == pytest.approx(band, rel=0.05), name
+
+
+def test_validate_refuses_a_bad_sequence_with_file_line_and_exit_2(tmp_path):
+    """The command line: `geoback validate` on a section whose lining is installed before its part is
+    dug says where (file:line:column: field), what was expected and found, exit 2, no traceback."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    data = natm(stages=[{"name": "a", "install": ["shotcrete"]}, {"name": "b", "excavate": ["tunnel"]}],
+                linings=[{"name": "shotcrete", "on": "heading", "thickness": 0.25, "E": "10 GPa", "nu": 0.2}])
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    out = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "validate", str(path)], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert "Traceback" not in out.stderr
+    assert re.search(r"bad\.yaml:\d+:\d+: construction\.stages\[0\]\.install\[0\]: expected lining 'shotcrete' "
+                     r"installed at or after the excavation of 'heading', found 'heading' not yet excavated",
+                     out.stderr + out.stdout)
