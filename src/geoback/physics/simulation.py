@@ -225,10 +225,10 @@ class Simulation(ABC):
         m = survey.m
         x = pred.x[:m]
         A_phys = pred.A[:m] if sensitivities and pred.A is not None else None
-        for name, v in values.items():
+        for name, v in values.items():  # (another instrument's terms: not this survey's readings, e.g. a view's)
             if v == 0:
                 continue
-            if is_constant(name):
+            if is_constant(name) and name in survey.constant_names:
                 x = x - survey.G[:, survey.constant_names.index(name)] * v
             elif name.startswith("bias[") and name in survey.error_names:
                 x = x + survey.bias_column(name) * v
@@ -236,14 +236,16 @@ class Simulation(ABC):
             return Prediction(x)
         A = np.zeros((len(x), len(wrt)))
         k = 0
-        for j, name in enumerate(wrt):
+        for j, name in enumerate(wrt):  # an instrument term of another survey's instrument: a zero column
             if is_constant(name):
-                A[:, j] = survey.constant_column(name)
+                if name in survey.constant_names:
+                    A[:, j] = survey.constant_column(name)
             elif name in survey.depth_rows:
                 rows, extra = survey.depth_rows[name]
                 A[rows, j] = pred.x[extra]
             elif is_instrument_error(name):
-                A[:, j] = survey.bias_column(name)
+                if name.startswith("bias[") and name in survey.error_names:
+                    A[:, j] = survey.bias_column(name)
             else:
                 A[:, j] = A_phys[:, k]
                 k += 1
