@@ -120,3 +120,35 @@ def test_forecast_elsewhere_with_an_instrument_term_identified(term, initial):
     j = fc.parameters.index(term)
     assert rows.any() and np.all(np.isfinite(fc.value[rows]))
     assert np.all(fc.sensitivity[rows, j] == 0)  # the trough does not depend on another instrument's term
+
+
+def test_mohr_coulomb_layer_without_thickness_is_refused_located(tmp_path):
+    """The plastic case with its layer listed twice (both at the surface): the strength check divided
+    by the vertical stress at the first layer's bottom, 0 (ZeroDivisionError: a traceback from
+    load_case and validate). Now the layers' order and names are refused, located."""
+    data = _data("plastic-tunnel.yaml")
+    data["ground"]["layers"].append(dict(data["ground"]["layers"][0]))
+    path = tmp_path / "case.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    with pytest.raises(CaseError) as info:
+        load_case(path)
+    assert any("ground.layers[1].top: expected layer tops increasing downwards" in str(p) for p in info.value.problems)
+
+
+def test_release_parameter_below_the_stage_before(tmp_path):
+    """beta[final] identified from 0.35, below beta[face-past] = 0.8: the engine's own check raised
+    "ValueError: stages must be increasing release fractions > 0, found [0.5, 0.8, 0.35]" (a traceback
+    from identify; the same words without context from `geoback run`). Now a point the model cannot be
+    run at, said in the case's names: refused at the start of a fit, a rejected step during one."""
+    from geoback.errors import ForwardFailure
+    from geoback.inference.identification import identify, prepare
+
+    data = _data("plastic-tunnel.yaml")
+    data["mesh"] = {"size_tunnel": 1.5, "size_far": 10.0}
+    data["parameters"][3] = {"name": "beta[final]", "initial": 0.35, "bounds": [0.05, 1.0]}
+    analysis = prepare(LoadedCase(case_from_data(data), None, {}))
+    with pytest.raises(ForwardFailure, match=r"the model cannot be solved at the values the fit starts from \(.*"
+                                             r"beta\[final\] = 0\.35\): the releases must increase from stage to "
+                                             r"stage with mohr-coulomb ground, found beta\[final\] = 0\.35 after "
+                                             r"beta\[face-past\] = 0\.8"):
+        identify(analysis)
