@@ -51,6 +51,10 @@ def fit_caveats(fit, rel, params, limits, profiled: dict) -> list[Caveat]:
     out: list[Caveat] = []
     if fit.status != "converged" and fit.moved:
         out.append(Caveat("not-converged", f"the fit did not converge: {fit.reason}"))
+    # what the fit itself warns of (estimate.WARNINGS: stopped at the time limit, points without a solution)
+    # is a caveat here, where every result is concluded, so that the library's identify() says it as
+    # `geoback run` does and nothing a fit knows about its end is left in a field no report reads
+    out.extend(Caveat(code, message) for code, message in getattr(fit, "warnings", ()))
     if not fit.moved:
         out.append(Caveat("did-not-move", "the fit stopped without moving from the initial values: no step "
                                           "decreased J (check the initial values and bounds; try --method lm)"))

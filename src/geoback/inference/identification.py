@@ -483,6 +483,11 @@ def identify(case, method: str | None = None, progress=None, weighting: str | No
                 "mesh-error", merr.text() + f": above {WARN:g} sigma, the mesh may bias the estimate; refine the "
                 "mesh near the instruments (mesh.size_tunnel, mesh.size_instruments) or add the error to C_x "
                 "with fit: {mesh_error: include}"),)
+    if merr is not None and merr.skipped.startswith("the model could not be solved"):
+        from geoback.inference.caveats import Caveat
+
+        # (the fit is kept: its finer mesh has no solution, so the check is skipped and the result says so)
+        notices = tuple(notices) + (Caveat("model-unsolved", f"discretisation error not checked: {merr.skipped}"),)
     counts = sim.counters.since(before)
     t2 = time.perf_counter()
     out = conclude(misfit, result, analysis.case, analysis.loaded.digest(), counts,
