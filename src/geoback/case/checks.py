@@ -273,9 +273,11 @@ def expand_candidates(design) -> list[tuple[int, object]]:
         (field, values), = c.vary.items()
         base = c.model_dump(exclude={"vary"})
         for k, v in enumerate(values):
-            number = isinstance(v, (int, float)) and not isinstance(v, bool)
-            name = f"{c.name}-{field}{number_text(v)}" if number else f"{c.name}-{k + 1}"
-            out.append((i, type(c).model_validate({**base, field: v, "name": name})))
+            variant = type(c).model_validate({**base, field: v})
+            value = getattr(variant, field)  # as validated: a quoted '4.5' is named as 4.5 is
+            number = isinstance(value, (int, float)) and not isinstance(value, bool)
+            name = f"{c.name}-{field}{number_text(value)}" if number else f"{c.name}-{k + 1}"
+            out.append((i, type(c).model_validate({**base, field: value, "name": name})))
     return out
 
 

@@ -101,7 +101,7 @@ def fit_caveats(fit, rel, params, limits, profiled: dict) -> list[Caveat]:
                                                        f"of variation)", name))
         if lim is not None and not (lim.plausible[0] <= p <= lim.plausible[1]):
             out.append(Caveat("implausible-value", f"{name} = {_value(p, unit)} is outside the usual range for "
-                                                   f"ground ({_value(lim.plausible[0], unit)} to "
+                                                   f"{getattr(lim, 'usual_for', 'ground')} ({_value(lim.plausible[0], unit)} to "
                                                    f"{_value(lim.plausible[1], unit)})", name))
     return out
 
