@@ -334,6 +334,19 @@ def stage_survey(loaded, blocks, stages: list[str], fe) -> Survey:
     last stage); a block read at a stage the simulation does not compute is refused, located."""
     from geoback.observation.instruments import build_survey, case_blocks
 
+    from geoback.physics.fem import OutsideMesh
+
     blocks = blocks if blocks is not None else [b.at(stages[-1]) for b in case_blocks(loaded)]
     refuse_late_blocks(loaded, blocks, stages)
-    return build_survey(blocks, fe)
+    try:
+        return build_survey(blocks, fe)
+    except OutsideMesh as exc:  # the case's checks passed it: said with the instrument it belongs to
+        b = next((b for b in blocks if np.any(np.all(np.isclose(b.points, exc.point, rtol=0, atol=1e-12), axis=1))),
+                 None)
+        if b is None:
+            raise
+        x, y = exc.point
+        raise loaded.error(("instruments", b.index),
+                           f"expected every point instrument '{b.name}' reads inside the meshed ground, found "
+                           f"({x:g}, {y:g}) outside it; move the instrument into the ground (off the tunnel wall "
+                           f"and the model's edges)") from None
