@@ -358,8 +358,12 @@ def outcome(steps, case, out):
                 break
             res = geoback.identify(analysis, profile='auto', mesh_error=None)
         elif step == 'forecast':
-            if loaded.case.forecasts and res is not None and res.fit.moved:
-                geoback.forecast(analysis, res)
+            if loaded.case.forecasts and res is not None:
+                try:  # a fit that never moved has no estimate: refused in words (the rest goes on)
+                    geoback.forecast(analysis, res)
+                except GeobackError as exc:
+                    if res.fit.moved or not str(exc).startswith('forecast: the identification stopped without moving'):
+                        raise
         elif step == 'diagnose':
             geoback.diagnose(loaded, max_rounds=1, refit_top=2)
         elif step == 'run_case':
