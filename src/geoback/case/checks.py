@@ -342,11 +342,43 @@ def expand_candidates(design) -> list[tuple[int, object]]:
 READINGS_OPTIONS = ("stage", "columns", "ignore_columns", "point_ids", "sign")  # how readings are read
 
 
+def _variant_problems(case: Case) -> list[tuple[tuple, str]]:
+    """A `vary` value that makes no valid candidate, located at the value (design.candidates[i].vary.x[k],
+    and within it) in the words the case's own fields get: it was "design.candidates: ... points.0.0:
+    Value error, expected a finite number ..." (pydantic's wording, the value's place lost). The first
+    bad value of each candidate."""
+    from pydantic import ValidationError
+
+    from geoback.case.messages import described_problems
+
+    out, full = [], None
+    for i, c in enumerate(case.design.candidates):
+        if not c.vary:
+            continue
+        (field, values), = c.vary.items()
+        base = c.model_dump(exclude={"vary"})
+        for k, v in enumerate(values):
+            variant = {**base, field: v}
+            try:
+                type(c).model_validate(variant)
+            except ValidationError as exc:
+                if full is None:
+                    full = case.model_dump()
+                data = {**full, "design": {**full["design"], "candidates": [
+                    variant if j == i else cand for j, cand in enumerate(full["design"]["candidates"])]}}
+                at = ("design", "candidates", i)
+                errors = [{**e, "loc": at + (c.kind,) + tuple(e["loc"])} for e in exc.errors()]  # as in the case
+                where, message = described_problems(errors, data, {})[0]
+                if where[:4] == at + (field,):
+                    where = at + ("vary", field, k) + where[4:]
+                out.append((where, message))
+                break
+    return out
+
+
 def design_problems(case: Case) -> list[tuple[tuple, str]]:
     """Candidates without readings, at known stages, in the ground; `vary` one field of theirs;
     targets that are forecasts of the case."""
-    from pydantic import ValidationError
-
     from geoback.case.construction import stage_names
 
     d = case.design
@@ -389,12 +421,10 @@ def design_problems(case: Case) -> list[tuple[tuple, str]]:
                 continue
     if out:
         return out
-    try:
-        expanded = expand_candidates(d)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        return [(("design", "candidates"), f"expected every varied candidate to be a valid instrument, found "
-                                           f"{'.'.join(map(str, err['loc']))}: {err['msg']}")]
+    out = _variant_problems(case)
+    if out:
+        return out
+    expanded = expand_candidates(d)
     names = [c.name for _, c in expanded] + [ins.name for ins in case.instruments]
     for i, c in expanded:
         if names.count(c.name) > 1:
