@@ -97,10 +97,26 @@ NAMES = {"elastic": ["E", "K0", "nu", "E[clay]", "nu[clay]", "K0[clay]", "A[SM1]
                      "beta[face-near]", "beta[final]", "A[X1]", "B[I1]"]}
 
 
+FIT_VALUES = {"method": ["gn", "lm", "lm-scaled"], "weighting": ["full", "diagonal", "identity"],
+              "max_iterations": [1, 2, 3, 6], "mesh_error": ["check", "include", "ignore"], "mu0": [1e-3, 1.0, 1e3],
+              "step_tol": [1e-12, 1e-3, 0.5], "objective_tol": [1e-14, 1e-2, 0.9]}
 # what a mutation changes: mostly what a valid case may say (the validate fuzzer covers broken files)
 MUTATIONS = ["scale", "scale", "special", "drop", "duplicate", "stages", "stages", "strength", "strength",
              "parameter", "parameter", "readings", "csv", "csv", "forecast", "forecast", "scales", "scales",
              "fit", "fit", "mesh", "swap"]
+
+
+# strength values: (usual, odd)
+STRENGTH = {"c": ([5, 20, 50, 200, 1e4], [0, 1e-3, 1e9, -5]), "phi": ([15, 25, 30, 40, 44.9], [0, 0.1, 60, 89.9, 90]),
+            "psi": ([0, 5, 10, 20], [30, 45, -5, 89]), "tension": ([0, 1, 10], [100, -1])}
+# a parameter's usual size, by its stem
+TYPICAL = {"E": 3e4, "K0": 0.8, "nu": 0.3, "c": 50.0, "phi": 30.0, "psi": 5.0, "tension": 5.0, "beta": 0.5,
+           "A": 1e-3, "B": 1e-3, "bias": 1e-4, "zoff": 0.1, "Egrad": 100.0, "n": 1.5}
+
+
+def _pick(rnd, usual: list, odd: list):
+    """A usual value three times in four, else an odd one."""
+    return rnd.choice(usual if rnd.random() < 0.75 else odd)
 
 
 def _numbers(data):
@@ -114,7 +130,7 @@ def _mutate_once(kind: str, data: dict, files: dict, rnd) -> None:
         numbers = _numbers(data)
         if numbers:
             at = rnd.choice(numbers)
-            _get(data, at[:-1])[at[-1]] = _get(data, at) * rnd.choice(FACTORS)
+            _get(data, at[:-1])[at[-1]] = _get(data, at) * _pick(rnd, [0.5, 0.9, 1.1, 2.0], FACTORS)
     elif what == "special":
         numbers = _numbers(data)
         if numbers:
@@ -145,20 +161,27 @@ def _mutate_once(kind: str, data: dict, files: dict, rnd) -> None:
         if isinstance(layers, list) and layers and isinstance(layers[0], dict):
             layer = rnd.choice(layers)
             layer["model"] = "mohr-coulomb"
-            for field, values in (("c", [0, 1e-3, 1, 10, 50, 1e4, 1e9, -5]), ("phi", [0, 0.1, 10, 30, 44.9, 60, 89.9, 90]),
-                                  ("psi", [0, 5, 30, 45, -5, 89]), ("tension", [0, 1, 100, -1])):
-                if (rnd.random() < 0.5):
-                    layer[field] = rnd.choice(values)
+            for field, (usual, odd) in STRENGTH.items():
+                if rnd.random() < 0.5:
+                    layer[field] = _pick(rnd, usual, odd)
+            if isinstance(layer.get("phi"), (int, float)) and isinstance(layer.get("psi"), (int, float)) \
+                    and rnd.random() < 0.75:
+                layer["psi"] = min(layer["psi"], layer["phi"])
     elif what == "parameter":
         params = data.setdefault("parameters", [])
         if isinstance(params, list):
             name = rnd.choice(NAMES[kind])
-            spec = {"name": name, "initial": rnd.choice([0, 1e-6, 0.3, 1, 5, 30, 1e4, 3e4, 1e9, -1])}
-            if (rnd.random() < 0.5):
-                spec["bounds"] = sorted(rnd.choices([-1, 0, 1e-3, 0.5, 1, 10, 45, 1e5, 1e9], k=2), reverse=rnd.random() < 0.5)
-            if (rnd.randint(0, 3) == 0):
-                spec["prior"] = {"mean": rnd.choice([0, 1, 1e4]), "std": rnd.choice([0, 1e-9, 1, 1e9])}
-            if params and (rnd.random() < 0.5):
+            typical = TYPICAL.get(name.split("[")[0], 1.0)
+            spec = {"name": name, "initial": _pick(rnd, [typical * f for f in (0.3, 0.7, 1.0, 1.5, 3.0)],
+                                                   [0, 1e-6, -1, 1e9])}
+            if rnd.random() < 0.5:
+                spec["bounds"] = _pick(rnd, [[typical / 10, typical * 10], [typical / 2, typical * 2]],
+                                       [sorted(rnd.choices([-1, 0, 1e-3, 0.5, 1, 10, 45, 1e5, 1e9], k=2),
+                                               reverse=rnd.random() < 0.5)])
+            if rnd.randint(0, 3) == 0:
+                spec["prior"] = _pick(rnd, [{"mean": typical, "std": typical / 4}],
+                                      [{"mean": rnd.choice([0, 1, 1e4]), "std": rnd.choice([0, 1e-9, 1, 1e9])}])
+            if params and rnd.random() < 0.5:
                 params[rnd.randrange(len(params))] = spec
             else:
                 params.append(spec)
@@ -216,7 +239,9 @@ def _mutate_once(kind: str, data: dict, files: dict, rnd) -> None:
     elif what == "forecast":
         fcs = data.setdefault("forecasts", [])
         if isinstance(fcs, list):
-            stage = rnd.choice([None, "advance", "lined", "final", "face-near", "nope"])
+            stages = [st_.get("name") for st_ in (data.get("construction") or {}).get("stages", [])
+                      if isinstance(st_, dict)] if isinstance(data.get("construction"), dict) else []
+            stage = rnd.choice([None, None, "nope"] + stages * 3)
             g = data.get("geometry", {})
             w = g.get("width", 50) if isinstance(g, dict) else 50
             choice = rnd.choice(["points", "line", "convergence", "instrument", "lining"])
@@ -253,8 +278,8 @@ def _mutate_once(kind: str, data: dict, files: dict, rnd) -> None:
     elif what == "fit":
         fit = data.setdefault("fit", {})
         if isinstance(fit, dict):
-            fit[rnd.choice(["method", "weighting", "max_iterations", "mesh_error", "mu0"])] = rnd.choice(
-                ["gn", "lm", "lm-scaled", "identity", "diagonal", 1, 2, 0.0, 1e-9, 1e9])
+            key = rnd.choice(list(FIT_VALUES))
+            fit[key] = rnd.choice(FIT_VALUES[key] if rnd.random() < 0.8 else ["gn", "full", 1, 0.0, 1e9, "x"])
     elif what == "mesh":
         mesh = data.setdefault("mesh", {})
         g = data.get("geometry", {})
@@ -333,8 +358,12 @@ def outcome(steps, case, out):
                 break
             res = geoback.identify(analysis, profile='auto', mesh_error=None)
         elif step == 'forecast':
-            if loaded.case.forecasts and res is not None and res.fit.moved:
-                geoback.forecast(analysis, res)
+            if loaded.case.forecasts and res is not None:
+                try:  # a fit that never moved has no estimate: refused in words (the rest goes on)
+                    geoback.forecast(analysis, res)
+                except GeobackError as exc:
+                    if res.fit.moved or not str(exc).startswith('forecast: the identification stopped without moving'):
+                        raise
         elif step == 'diagnose':
             geoback.diagnose(loaded, max_rounds=1, refit_top=2)
         elif step == 'run_case':
@@ -440,7 +469,7 @@ class ApiFuzz:
         self.folder = folder
         self.work = folder / "work"
         self.work.mkdir()
-        self.out = self.work / "out"  # the only place results may go
+        self.out = self.work / "out"  # the only place results may go (API: out/api, commands: out/<command>)
         self.env = dict(os.environ, GEOBACK_CACHE=str(folder / "cache"), OPENBLAS_NUM_THREADS="1",
                         MKL_NUM_THREADS="1", OMP_NUM_THREADS="1")
         for var in ("GEOBACK_DEBUG", "GEOBACK_MAX_DOFS"):
@@ -450,7 +479,7 @@ class ApiFuzz:
         self.cli_every = cli_every
         self.count = 0
         self.stats = {"examples": 0, "by_kind": {}, "steps": {}, "refused": 0, "cli": 0, "max_seconds": 0.0,
-                      "errors": {}, "seconds": {}, "time_limited": 0}
+                      "errors": {}, "seconds": {}, "time_limited": 0, "refused_at": {}}
         self.cases_before = snapshot(CASES, set())
 
     def check(self, example) -> None:
@@ -464,7 +493,7 @@ class ApiFuzz:
         case.write_text(yaml.safe_dump(data, sort_keys=False, allow_unicode=True), encoding="utf-8")
         text = case.read_text(encoding="utf-8")
         before = snapshot(self.work, {"out"})
-        res = self.worker.run(case, steps, self.out)
+        res = self.worker.run(case, steps, self.out / "api")
         assert not res.get("hung"), f"hung for {res['seconds']:.0f} s in {steps}:\n{text}"
         assert "died" not in res, f"the worker died in {steps}: {res['died']}\n{text}"
         assert res["traceback"] is None, f"{res['traceback']}\n{text}"
@@ -480,6 +509,9 @@ class ApiFuzz:
             message = res["error"]
             key = res.get("error_type", "?")
             self.stats["errors"][key] = self.stats["errors"].get(key, 0) + 1
+            field = re.match(r"^[^:]+:\d+:\d+: ([^:]+):", message)
+            where = field.group(1).split(".")[0].split("[")[0] if field else message[:30]
+            self.stats["refused_at"][where] = self.stats["refused_at"].get(where, 0) + 1
             assert message.strip(), f"an empty message:\n{text}"
             check_text(message, f"in the message of {steps}")
         assert not res["warnings"], f"Python warnings {res['warnings']} in {steps}:\n{text}"

@@ -59,8 +59,66 @@ def _point_problem(g: Geometry, p: tuple, what: str) -> str | None:
     return None
 
 
+MIN_STATION_GAP = 1e-3  # m: no instrument reads two stations (or points) closer than a millimetre
+
+
+def min_station_gap(g: Geometry) -> float:
+    """How close two stations of one instrument may be: 1 mm, or 1e-4 of a smaller model's size (a
+    laboratory model). Closer, the finite elements cannot tell them apart (the mesh's smallest elements
+    are 1e-4 of the radius, and interpolation within one element gives them one reading to rounding),
+    and such a gap is a unit slip (mm written as m) or a point listed twice more often than a design."""
+    return min(MIN_STATION_GAP, 1e-4 * max(g.width, g.depth))
+
+
+def _closest_pair(points, gap: float) -> tuple[int, int, float] | None:
+    """The first two points (j < k) closer than `gap`, and their distance; None if there are none
+    (buckets of size `gap`: linear in the number of points)."""
+    cells: dict[tuple[int, int], list[int]] = {}
+    for k, (x, y) in enumerate(points):
+        cx, cy = math.floor(x / gap), math.floor(y / gap)
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for j in cells.get((cx + dx, cy + dy), ()):
+                    d = math.hypot(points[j][0] - x, points[j][1] - y)
+                    if d < gap:
+                        return j, k, d
+        cells.setdefault((cx, cy), []).append(k)
+    return None
+
+
+def _gap_problems(g: Geometry, at: tuple, ins) -> list[tuple[tuple, str]]:
+    """Stations, points or chord ends of one instrument closer than ``min_station_gap`` (located at the
+    field that places them): they passed silently, 1e-9 m apart, and fitted the model to one place's
+    readings counted twice or to a nanometre's slope."""
+    gap = min_station_gap(g)
+    why = "no instrument reads closer, and the mesh cannot tell them apart; check the unit (lengths are in metres)"
+    out = []
+    if ins.kind in ("points", "convergence"):
+        pts = [tuple(p) for p in ins.points]
+        pair = _closest_pair(pts, gap)
+        if pair is not None:
+            j, k, d = pair
+            what = "points" if ins.kind == "points" else "chord ends"
+            where = (f"at the same place as points[{j}]" if d == 0 else
+                     f"{number_text(d)} m from points[{j}] ({number_text(pts[j][0])}, {number_text(pts[j][1])})")
+            out.append((at + ("points", k), f"expected {what} at least {number_text(gap)} m apart, found "
+                                            f"({number_text(pts[k][0])}, {number_text(pts[k][1])}) {where}: {why}, "
+                                            f"and list a point once"))
+    elif getattr(ins, "lengths", None) is not None:
+        for j, length in enumerate(ins.lengths):
+            if length < gap:
+                out.append((at + ("lengths", j), f"expected stations at least {number_text(gap)} m apart, found "
+                                                 f"{number_text(length)} m: {why}"))
+                break
+    elif getattr(ins, "spacing", None) is not None and ins.spacing < gap:
+        out.append((at + ("spacing",), f"expected stations at least {number_text(gap)} m apart, found spacing "
+                                       f"{number_text(ins.spacing)} m: {why}"))
+    return out
+
+
 def _instrument_problems(g: Geometry, i: int, ins, at: tuple | None = None) -> list[tuple[tuple, str]]:
     at, out = at or ("instruments", i), []
+    out.extend(_gap_problems(g, at, ins))
     if ins.kind == "points":
         for j, p in enumerate(ins.points):
             why = _point_problem(g, p, "a point")
@@ -357,20 +415,54 @@ def expand_candidates(design) -> list[tuple[int, object]]:
         (field, values), = c.vary.items()
         base = c.model_dump(exclude={"vary"})
         for k, v in enumerate(values):
-            number = isinstance(v, (int, float)) and not isinstance(v, bool)
-            name = f"{c.name}-{field}{number_text(v)}" if number else f"{c.name}-{k + 1}"
-            out.append((i, type(c).model_validate({**base, field: v, "name": name})))
+            variant = type(c).model_validate({**base, field: v})
+            value = getattr(variant, field)  # as validated: a quoted '4.5' is named as 4.5 is
+            number = isinstance(value, (int, float)) and not isinstance(value, bool)
+            name = f"{c.name}-{field}{number_text(value)}" if number else f"{c.name}-{k + 1}"
+            out.append((i, type(c).model_validate({**base, field: value, "name": name})))
     return out
 
 
 READINGS_OPTIONS = ("stage", "columns", "ignore_columns", "point_ids", "sign")  # how readings are read
 
 
+def _variant_problems(case: Case) -> list[tuple[tuple, str]]:
+    """A `vary` value that makes no valid candidate, located at the value (design.candidates[i].vary.x[k],
+    and within it) in the words the case's own fields get: it was "design.candidates: ... points.0.0:
+    Value error, expected a finite number ..." (pydantic's wording, the value's place lost). The first
+    bad value of each candidate."""
+    from pydantic import ValidationError
+
+    from geoback.case.messages import described_problems
+
+    out, full = [], None
+    for i, c in enumerate(case.design.candidates):
+        if not c.vary:
+            continue
+        (field, values), = c.vary.items()
+        base = c.model_dump(exclude={"vary"})
+        for k, v in enumerate(values):
+            variant = {**base, field: v}
+            try:
+                type(c).model_validate(variant)
+            except ValidationError as exc:
+                if full is None:
+                    full = case.model_dump()
+                data = {**full, "design": {**full["design"], "candidates": [
+                    variant if j == i else cand for j, cand in enumerate(full["design"]["candidates"])]}}
+                at = ("design", "candidates", i)
+                errors = [{**e, "loc": at + (c.kind,) + tuple(e["loc"])} for e in exc.errors()]  # as in the case
+                where, message = described_problems(errors, data, {})[0]
+                if where[:4] == at + (field,):
+                    where = at + ("vary", field, k) + where[4:]
+                out.append((where, message))
+                break
+    return out
+
+
 def design_problems(case: Case) -> list[tuple[tuple, str]]:
     """Candidates without readings, at known stages, in the ground; `vary` one field of theirs;
     targets that are forecasts of the case."""
-    from pydantic import ValidationError
-
     from geoback.case.construction import stage_names
 
     d = case.design
@@ -413,12 +505,10 @@ def design_problems(case: Case) -> list[tuple[tuple, str]]:
                 continue
     if out:
         return out
-    try:
-        expanded = expand_candidates(d)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        return [(("design", "candidates"), f"expected every varied candidate to be a valid instrument, found "
-                                           f"{'.'.join(map(str, err['loc']))}: {err['msg']}")]
+    out = _variant_problems(case)
+    if out:
+        return out
+    expanded = expand_candidates(d)
     names = [c.name for _, c in expanded] + [ins.name for ins in case.instruments]
     for i, c in expanded:
         if names.count(c.name) > 1:
@@ -465,6 +555,8 @@ def forecast_problems(case: Case) -> list[tuple[tuple, str]]:
             if f.kind == "convergence" and len(f.points) == 2 and tuple(f.points[0]) == tuple(f.points[1]):
                 out.append((at + ("points",), f"expected a chord between two distinct points, found both at "
                                               f"({number_text(f.points[0][0])}, {number_text(f.points[0][1])})"))
+            elif f.kind == "convergence":
+                out.extend(_gap_problems(g, at, f))
         elif f.kind == "line":
             for key, p in (("start", f.start), ("end", f.end)):
                 why = _point_problem(g, p, f"the line's {key}")

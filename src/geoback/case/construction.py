@@ -24,7 +24,7 @@ from typing import Mapping
 
 import numpy as np
 
-from geoback.case.limits import QUANTITIES, Limits
+from geoback.case.limits import LINING, QUANTITIES, Limits
 from geoback.case.schema import Case, number_text
 
 DEFAULT_STAGE = "excavation"
@@ -105,11 +105,15 @@ class StagePlan:
         return name if self.knows(name) else None
 
     def unit(self, name: str) -> str | None:
-        return QUANTITIES[name.partition("[")[0]][0] if self.knows(name) else None
+        return self._table(name)[name.partition("[")[0]][0] if self.knows(name) else None
 
     def limits(self, name: str, values: Mapping) -> Limits | None:
-        """Allowed and usual range of a release or a lining value (``limits.QUANTITIES``)."""
-        return QUANTITIES[name.partition("[")[0]][1] if self.knows(name) else None
+        """Allowed and usual range of a release (``limits.QUANTITIES``) or a lining value (``limits.LINING``:
+        concrete's usual moduli, not the ground's, so that a modulus in MPa where GPa was meant is said)."""
+        return self._table(name)[name.partition("[")[0]][1] if self.knows(name) else None
+
+    def _table(self, name: str) -> dict:
+        return LINING if name in self.lining_names() else QUANTITIES
 
     @property
     def configurations(self) -> list[int]:

@@ -15,6 +15,7 @@ class Limits:
     lo: float
     hi: float
     plausible: tuple[float, float]
+    usual_for: str = "ground"  # what `plausible` is usual for, in the words of a warning
 
     def contains(self, v: float) -> bool:
         return self.lo <= v <= self.hi
@@ -34,6 +35,12 @@ DILATION = Limits(0.0, 69.99, (0.0, 20.0))  # and psi <= phi (strength.py)
 TENSION = Limits(0.0, 1e6, (0.0, 500.0))
 UNIT_WEIGHT = Limits(0.1, 100.0, (12.0, 27.0))  # kN/m3: of soil and rock
 RELEASE = Limits(1e-3, 1.0, (0.05, 1.0))  # a fraction of the in-situ wall stress released (beta): at most all of it
+# A lining is concrete or shotcrete, not ground: its modulus is usually 1 GPa (shotcrete a few hours
+# old, or a segmental ring's joints smeared) to 50 GPa (high-strength concrete). The ground's usual
+# range (0.5 MPa .. 20 GPa) let a lining's `E: 30` (30 kPa for 30 GPa) warn as "unusual for ground" and
+# `E: 30000` or `E: 30 MPa` (30 MPa where 30 GPa was meant: a thousand times too soft) pass silently.
+LINING_MODULUS = Limits(MODULUS.lo, MODULUS.hi, (1e6, 5e7), "a concrete or shotcrete lining")
+LINING_POISSON = Limits(POISSON.lo, POISSON.hi, POISSON.plausible, "a concrete or shotcrete lining")
 
 # The unit and range of every named quantity of a case, by its stem (E[clay], E[shotcrete], c[marl],
 # beta[advance], ...): the ground's and the lining's elasticity, the in-situ stress ratio, the strength
@@ -44,3 +51,5 @@ QUANTITIES: dict[str, tuple[str, Limits]] = {
     "c": ("kPa", COHESION), "phi": ("deg", FRICTION), "psi": ("deg", DILATION), "tension": ("kPa", TENSION),
     "beta": ("-", RELEASE), "gamma": ("kN/m3", UNIT_WEIGHT),
 }
+# The lining's own values (E[shotcrete], nu[shotcrete]): the same units, a lining's usual ranges
+LINING: dict[str, tuple[str, Limits]] = {"E": ("kPa", LINING_MODULUS), "nu": ("-", LINING_POISSON)}

@@ -216,10 +216,13 @@ def estimate(inputs: dict, work: Work | None = None, limit: float | None = None)
     `work` (default: elastic ground); `limit` (DOFs of elastic ground, default ``max_dofs()``) decides
     whether the run's discretisation-error check is made (``check_fits``)."""
     order = int(inputs.get("order", 2))
-    try:
-        counts, boundary = _integrate(inputs)
+    try:  # (absurd coordinates overflow: an infinite estimate, refused, never a numpy warning)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+            counts, boundary = _integrate(inputs)
     except (ZeroDivisionError, OverflowError, ValueError, FloatingPointError, MemoryError):
         counts, boundary = {"size_far": math.inf}, math.inf
+    counts = {k: (math.inf if math.isnan(v) else v) for k, v in counts.items()}
+    boundary = math.inf if math.isnan(boundary) else boundary
     elements = float(sum(counts.values()))
     # Euler: a triangulation with T triangles and B boundary edges has (T + B)/2 + 1 vertices and
     # (3T + B)/2 edges; quadratic elements have a node on every edge as well
@@ -290,8 +293,7 @@ def _size_field(inputs: dict, pts: np.ndarray | None):
             di = np.full_like(x, np.inf)
             for k in range(0, len(pts), 64):
                 p = pts[k:k + 64]
-                di = np.minimum(di, np.sqrt((x[:, None] - p[None, :, 0]) ** 2
-                                            + (y[:, None] - p[None, :, 1]) ** 2).min(axis=1))
+                di = np.minimum(di, np.hypot(x[:, None] - p[None, :, 0], y[:, None] - p[None, :, 1]).min(axis=1))
             di = np.maximum(di - slack, 0.0)
             hi = np.clip(si + growth * (di - si), si, far)
             which = np.where(hi < size, 2, which)

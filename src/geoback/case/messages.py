@@ -53,8 +53,8 @@ def clean_loc(loc: tuple, data: Any) -> tuple:
     """Drop the union tags pydantic inserts (e.g. 'inclinometer') so the path follows the file."""
     out: list = []
     for k, part in enumerate(loc):
-        if k == 2 and loc[0] == "instruments" and part in _KINDS:
-            continue  # the discriminated union's tag
+        if (k == 2 and loc[0] == "instruments" or k == 3 and loc[:2] == ("design", "candidates")) and part in _KINDS:
+            continue  # the discriminated union's tag (of an instrument, or of a design's candidate)
         if isinstance(part, str) and ("[" in part or part.startswith(("function-", "tagged-union"))):
             continue  # a validator's tag such as 'function-after[...]'
         if part in ("in-order", "by-stage") and out and out[-1] == "readings":

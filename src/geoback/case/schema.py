@@ -51,8 +51,23 @@ def shown(value: Any) -> str:
     return type(value).__name__
 
 
+def _spelled(value: str) -> Any:
+    """A quoted number (YAML `!!str 10`, `'0.3'`) read as the number it spells, so that it is used
+    exactly as the same number unquoted is, and checked the same way (`'nan'` and `'1e400'` are not
+    finite, as `.nan` is not); text that spells no number is left for the field's own message."""
+    try:
+        number = float(value)
+    except ValueError:
+        return value
+    if not math.isfinite(number):
+        raise ValueError(f"expected a finite number, found {shown(value)}")
+    return number
+
+
 def _number(value: Any) -> Any:
     """Numbers only: reject true/false (YAML's yes/no), NaN, infinities and overflowing integers."""
+    if isinstance(value, str):
+        return _spelled(value)
     if isinstance(value, bool):
         raise ValueError(f"expected a number, found {shown(value)}")
     if isinstance(value, float) and not math.isfinite(value):
@@ -69,6 +84,9 @@ def _flag(value: Any) -> Any:
 
 
 def _whole(value: Any) -> Any:
+    if isinstance(value, str):  # '2' as 2 (an element order among 1 and 2 too), '7.5' left to be refused
+        value = _spelled(value)
+        return int(value) if isinstance(value, float) and value.is_integer() else value
     if isinstance(value, bool):
         raise ValueError(f"expected a whole number, found {shown(value)}")
     return value

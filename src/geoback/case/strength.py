@@ -146,6 +146,8 @@ def strength_problems(case: Case) -> list[tuple[tuple, str]]:
         if k0 is None:
             continue
         sv = case.ground.unit_weight * bottoms[i]
+        if not sv > 0:  # a layer without thickness at the surface (refused with the layers' order)
+            continue
         lo, hi = _k0_range(sv, layer.c, layer.phi)
         if not lo <= k0 <= hi:
             where = at + ("K0",) if layer.K0 is not None else ("ground", "K0")

@@ -320,11 +320,12 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
 
     if not 0.0 < alpha < 1.0:  # (nan fails too) checked again by the library; here before any work
         raise GeobackError(f"--alpha: expected a significance level between 0 and 1 (e.g. 0.05), found {alpha:g}")
+    say = None if quiet else _say
+    limit = _limited(time_limit, say)
     out = _check_out(out)
     loaded = _load(case, allow_large)
     folder = _out_dir(loaded, out)
-    say = None if quiet else _say
-    with _limited(time_limit, say):
+    with limit:
         d = run_diagnosis(loaded, alpha=alpha, progress=say)
         exploration = explore(d.final_misfit, d.final, ("profiles",)) if plots else None
         write_diagnosis(d, folder, plots=plots, exploration=exploration)
@@ -368,6 +369,8 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         time_limit: Optional[str] = _time_limit_option()):
     """Identify the case's parameters by maximum likelihood and write all results."""
     method = method.value if method is not None else None
+    talk = not quiet and not as_json
+    limit = _limited(time_limit, _say if talk else None)  # (a bad --time-limit is refused before any work)
     out = _check_out(out)
     loaded = _load(case, allow_large)  # schema errors first: no heavy imports before them
     folder = _out_dir(loaded, out)
@@ -376,7 +379,6 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
 
     names: list[str] = []
     units: list[str] = []
-    talk = not quiet and not as_json
     from geoback.units import number, shown
 
     def progress(it):
@@ -393,7 +395,7 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         units[:] = analysis.parameters.units
 
     matched: list[str] = []
-    with _limited(time_limit, _say if talk else None):
+    with limit:
         res = run_case(loaded, folder, method=method, progress=progress, plots=plots, say=_say if talk else None,
                        prepared=named, profile="all" if profile else "auto", matched=matched.extend,
                        objective_map=objective_map.value)

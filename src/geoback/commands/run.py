@@ -35,15 +35,24 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
     if prepared is not None:
         prepared(analysis)
     res = identify(analysis, method=method, progress=progress, profile=profile, mesh_error=None)
-    res = with_fit_warnings(res)
-    if loaded.case.forecasts and res.fit.moved:
-        from geoback.worth.forecast import forecast
+    if loaded.case.forecasts:
+        from geoback.worth.forecast import forecast, unusable_estimate
         from geoback.reports.forecast_report import forecast_caveats
 
-        if say is not None:
-            say(f"forecasts: {', '.join(f.name for f in loaded.case.forecasts)}")
-        fc = forecast(analysis, res, progress=say)
-        res = replace(res, forecasts=fc, caveats=tuple(res.caveats) + tuple(forecast_caveats(fc)))
+        names = ", ".join(f.name for f in loaded.case.forecasts)
+        why = unusable_estimate(res)
+        if why:  # what the library's forecast() refuses, said here and kept with the results
+            from geoback.inference.caveats import Caveat
+
+            if say is not None:
+                say(f"forecasts: {names} not computed: {why}")
+            res = replace(res, caveats=tuple(res.caveats) + (Caveat("forecast-skipped", f"forecasts {names} not "
+                                                                                        f"computed: {why}"),))
+        else:
+            if say is not None:
+                say(f"forecasts: {names}")
+            fc = forecast(analysis, res, progress=say)
+            res = replace(res, forecasts=fc, caveats=tuple(res.caveats) + tuple(forecast_caveats(fc)))
     vtu = loaded.case.output.vtu if vtu is None else vtu
     what = ("field",) if vtu else ()
     construction = loaded.case.construction
@@ -60,16 +69,3 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
     write_run(res, Path(out), exploration, plots=plots, readings=lines)
     return res
 
-
-def with_fit_warnings(res: Identification) -> Identification:
-    """The fit's warnings (``estimate.WARNINGS``: stopped at the time limit, a point without a solution
-    with its sensitivities) and a discretisation-error check the model could not be solved for, as
-    caveats of the result (once each)."""
-    from geoback.inference.caveats import Caveat
-
-    have = {c.code for c in res.caveats}
-    extra = [Caveat(code, message) for code, message in res.fit.warnings if code not in have]
-    merr = res.mesh_error
-    if merr is not None and merr.skipped.startswith("the model could not be solved") and "model-unsolved" not in have:
-        extra.append(Caveat("model-unsolved", f"discretisation error not checked: {merr.skipped}"))
-    return replace(res, caveats=tuple(res.caveats) + tuple(extra)) if extra else res

@@ -11,11 +11,14 @@ and a sentence that says what was found and what to check. Codes:
 | `at-bound` | a parameter ended at one of its bounds |
 | `not-determined` | the readings cannot fix a parameter or a combination (singular, or a 95 % interval wider than the parameter's usual range, or a coefficient of variation of 100 % or more) |
 | `poorly-determined` | a coefficient of variation between 30 % and 100 % |
-| `implausible-value` | an estimate outside the usual range for ground |
+| `implausible-value` | an estimate outside the usual range (for ground, or a concrete lining) |
 | `implausible-input` | a value of the case outside the usual range (a unit slip?) |
 | `exactly-determined` | as many readings as parameters: χ² cannot test the model |
 | `mesh-error` | the mesh's discretisation error on a reading above 0.3 of its sigma |
 | `error-scale` | an estimated error scale beyond what the case allows for it (its prior, or the other instruments) |
+| `forecast-skipped` | the case's forecasts were not computed: the fit never moved from the initial values (``worth.forecast.unusable_estimate``) |
+| `time-limit` | the fit was stopped at the time limit with its best point (``estimate.WARNINGS``) |
+| `model-unsolved` | points the model could not be solved at were rejected steps, or the discretisation-error check was skipped |
 | `forecast-nonlinear` | a forecast's linearised 95 % band and the range sampled through the model differ by more than 10 % |
 | `instrument-misfit` | one instrument (or error-scale group) whose stated σ is taken as exact drives the misfit: its readings alone ask for a scale far above the others' (F test), with its share of J, the signs of its residuals and whether its readings run opposite to the computed ones |
 
@@ -51,6 +54,10 @@ def fit_caveats(fit, rel, params, limits, profiled: dict) -> list[Caveat]:
     out: list[Caveat] = []
     if fit.status != "converged" and fit.moved:
         out.append(Caveat("not-converged", f"the fit did not converge: {fit.reason}"))
+    # what the fit itself warns of (estimate.WARNINGS: stopped at the time limit, points without a solution)
+    # is a caveat here, where every result is concluded, so that the library's identify() says it as
+    # `geoback run` does and nothing a fit knows about its end is left in a field no report reads
+    out.extend(Caveat(code, message) for code, message in getattr(fit, "warnings", ()))
     if not fit.moved:
         out.append(Caveat("did-not-move", "the fit stopped without moving from the initial values: no step "
                                           "decreased J (check the initial values and bounds; try --method lm)"))
@@ -97,7 +104,7 @@ def fit_caveats(fit, rel, params, limits, profiled: dict) -> list[Caveat]:
                                                        f"of variation)", name))
         if lim is not None and not (lim.plausible[0] <= p <= lim.plausible[1]):
             out.append(Caveat("implausible-value", f"{name} = {_value(p, unit)} is outside the usual range for "
-                                                   f"ground ({_value(lim.plausible[0], unit)} to "
+                                                   f"{getattr(lim, 'usual_for', 'ground')} ({_value(lim.plausible[0], unit)} to "
                                                    f"{_value(lim.plausible[1], unit)})", name))
     return out
 

@@ -155,7 +155,7 @@ def prepare(loaded: LoadedCase, mesh=None, backend: str | None = None, parameter
         return GeobackError(message)
 
     params, base, notices = resolve(specs, simulation, values, error=located)
-    notices += input_notices(case, simulation)
+    notices += input_notices(case, simulation, loaded)
     misfit = None
     if with_readings:
         if measured is not None:
@@ -166,22 +166,78 @@ def prepare(loaded: LoadedCase, mesh=None, backend: str | None = None, parameter
     return Analysis(loaded, simulation, params, base, misfit, Settings.of(case.fit), tuple(notices))
 
 
-def input_notices(case, simulation: Simulation) -> list:
-    """Case values outside the usual range for ground (a modulus written in Pa, say)."""
+def input_notices(case, simulation: Simulation, loaded: LoadedCase | None = None) -> list:
+    """Case values outside the usual range of what they describe (ground, or a concrete lining:
+    ``limits``): allowed, so not refused, but most often a unit slip - a modulus written in Pa, or a
+    lining's in MPa where GPa was meant (a bare number is kPa) - that leaves the model a thousand times
+    off without a word. Said with the field (file and line, when `loaded` has them) and the value it
+    would have been in the unit meant."""
     from geoback.inference.caveats import Caveat
 
     out = []
     values = simulation.quantities()
     for name, v in values.items():
         lim = simulation.limits(name, values)
-        if not lim.plausible[0] <= v <= lim.plausible[1]:
-            unit = simulation.unit(name)
-            hint = " (was it written in Pa? the case's stresses are in kPa: write e.g. '60 MPa')" \
-                if unit == "kPa" and v > lim.plausible[1] else ""
-            out.append(Caveat("implausible-input", f"{name} = {v:g} {unit if unit != '-' else ''} in the case is "
-                                                   f"outside the usual range for ground ({lim.plausible[0]:g} to "
-                                                   f"{lim.plausible[1]:g}){hint}".replace("  ", " "), name))
+        lo, hi = lim.plausible
+        if lo <= v <= hi:
+            continue
+        unit = simulation.unit(name)
+        text = (f"{name} = {_shown(v, unit)} in the case is outside the usual range for {lim.usual_for} "
+                f"({_shown(lo, unit)} to {_shown(hi, unit)}){_unit_hint(v, unit, lo, hi)}")
+        at = _field_of(case, name)
+        if at is not None and loaded is not None:
+            text = str(loaded.error(at, text))
+        elif at is not None:
+            from geoback.case.yamlmarks import format_path
+
+            text = f"{format_path(at)}: {text}"
+        out.append(Caveat("implausible-input", text, name))
     return out
+
+
+def _shown(v: float, unit: str) -> str:
+    """A value as engineers read it: 30000 kPa as '30 MPa', 3e7 kPa as '30 GPa'."""
+    from geoback.units import number, shown
+
+    factor, shown_unit = shown(unit, v)
+    return number(v * factor) + ("" if shown_unit in ("-", "") else f" {shown_unit}")
+
+
+def _unit_hint(v: float, unit: str, lo: float, hi: float) -> str:
+    """Which unit slip would explain a stress outside its usual range ('' for other quantities)."""
+    if unit != "kPa":
+        return ""
+    if v > hi:
+        if lo <= v / 1e3 <= hi:
+            return (f"; was it written in Pa? the case's stresses are in kPa: write the unit, e.g. "
+                    f"'{_shown(v / 1e3, unit)}'")
+        return "; check its unit (a number without a unit is read in kPa)"
+    for factor in (1e3, 1e6):  # MPa written (or a bare number read in kPa) where GPa (or MPa) was meant
+        if lo <= v * factor <= hi:
+            meant = _shown(v * factor, unit)
+            return f"; was {meant} meant? a number without a unit is read in kPa: write the unit, e.g. '{meant}'"
+    return "; check its unit (a number without a unit is read in kPa)"
+
+
+def _field_of(case, name: str) -> tuple | None:
+    """Where a named value of the case is written (the lining's E and nu, a layer's E, nu or K0, the
+    ground's K0, a stage's release), for a warning's file and line; None for any other name."""
+    stem, _, rest = name.partition("[")
+    key = rest[:-1] if rest.endswith("]") else None
+    construction = getattr(case, "construction", None)
+    lining = getattr(construction, "lining", None)
+    if lining is not None and key == lining.name and stem in ("E", "nu"):
+        return ("construction", "lining", stem)
+    if construction is not None and stem == "beta":
+        k = next((k for k, s in enumerate(construction.stages) if s.name == key), None)
+        return None if k is None else ("construction", "stages", k, "release")
+    if stem not in ("E", "nu", "K0"):
+        return None
+    layers = case.ground.layers
+    i = next((i for i, layer in enumerate(layers) if layer.name == key), 0 if len(layers) == 1 else None)
+    if i is not None and getattr(layers[i], stem, None) is not None:
+        return ("ground", "layers", i, stem)
+    return ("ground", stem) if getattr(case.ground, stem, None) is not None else None
 
 
 @dataclass(frozen=True)
@@ -483,6 +539,11 @@ def identify(case, method: str | None = None, progress=None, weighting: str | No
                 "mesh-error", merr.text() + f": above {WARN:g} sigma, the mesh may bias the estimate; refine the "
                 "mesh near the instruments (mesh.size_tunnel, mesh.size_instruments) or add the error to C_x "
                 "with fit: {mesh_error: include}"),)
+    if merr is not None and merr.skipped.startswith("the model could not be solved"):
+        from geoback.inference.caveats import Caveat
+
+        # (the fit is kept: its finer mesh has no solution, so the check is skipped and the result says so)
+        notices = tuple(notices) + (Caveat("model-unsolved", f"discretisation error not checked: {merr.skipped}"),)
     counts = sim.counters.since(before)
     t2 = time.perf_counter()
     out = conclude(misfit, result, analysis.case, analysis.loaded.digest(), counts,

@@ -188,7 +188,7 @@ def resolve(specs: Sequence, simulation: Simulation, values: Mapping | None = No
             notices.append(Caveat("implausible-input",
                                   f"the initial value of {name}, {p.initial:g}" + (f" {unit}" if unit not in ("-", "")
                                                                                     else "")
-                                  + f", is outside the usual range for ground ({lim.plausible[0]:g} to "
+                                  + f", is outside the usual range for {lim.usual_for} ({lim.plausible[0]:g} to "
                                     f"{lim.plausible[1]:g}); check its unit", name))
         names.append(name)
         init.append(p.initial)

@@ -48,9 +48,14 @@ def profile_interval(misfit, settings: Settings, p_hat: np.ndarray, J_min: float
     target = J_min + CHI2_1_95
     x0 = float(p_hat[i])
     J = _Profile(misfit, settings, i, p_hat)
+    seen: dict = {}  # each value's profile once: a fit from another start could land elsewhere (loose
+    # tolerances), and the root search must see the signs the search outwards saw
 
     def g(v):
-        return J(v) - target
+        v = float(v)
+        if v not in seen:
+            seen[v] = J(v) - target
+        return seen[v]
 
     ends = []
     for sign in (-1.0, 1.0):
@@ -63,17 +68,22 @@ def profile_interval(misfit, settings: Settings, p_hat: np.ndarray, J_min: float
         else:
             at = (lambda t: x0 + sign * half * t)
         inside, end = x0, None
+        linearised = float(np.clip(x0 + sign * half, min(lo_limit, hi_limit), max(lo_limit, hi_limit)))
         for k in range(MAX_STEPS):
             if budget.expired("a profile-likelihood interval"):  # the linearised end: the best there is now
-                end = float(np.clip(x0 + sign * half, min(lo_limit, hi_limit), max(lo_limit, hi_limit)))
+                end = linearised
                 break
             v = at(1.5 ** k)
             if (sign < 0 and v <= limit) or (sign > 0 and v >= limit):
                 v = limit
             try:
                 if g(v) >= 0:
-                    end = optimize.brentq(g, min(inside, v), max(inside, v), xtol=1e-4 * max(abs(x0), 1e-12),
-                                          rtol=1e-6)
+                    if g(inside) >= 0:  # not below the target where the search came from: J_min is not this
+                        # misfit's minimum (a fit stopped by a loose tolerance): the linearised end at the estimate
+                        end = linearised if inside == x0 else inside
+                    else:
+                        end = optimize.brentq(g, min(inside, v), max(inside, v), xtol=1e-4 * max(abs(x0), 1e-12),
+                                              rtol=1e-6)
                     break
             except ForwardFailure:  # no solution at v (or between): the profile did not see the readings bound
                 end = limit  # it there; the end is open (at its limit) rather than a bound it did not see

@@ -43,6 +43,15 @@ def _geometry(coords: np.ndarray, dN: np.ndarray):
     return inv, det  # inv[e,q,r,x] = d xi_r / d x_x
 
 
+class OutsideMesh(ValueError):
+    """A point where displacements are asked lies outside the meshed ground (``point``: its x, y), so
+    that a caller who knows where the point comes from can say so (the survey: which instrument)."""
+
+    def __init__(self, point):
+        self.point = (float(point[0]), float(point[1]))
+        super().__init__(f"point ({self.point[0]:g}, {self.point[1]:g}) lies outside the meshed ground")
+
+
 class FEModel:
     """Assembled operators of one mesh. Dofs are (ux, uy) per node: dof = 2*node + component."""
 
@@ -119,6 +128,7 @@ class FEModel:
         self.centroid = coords[:, :3].mean(axis=1)
         self.region = mesh.region
         self._tree = None
+        self._extent = None  # each element's widened extent, for points the nearest centroids miss
         if len(mesh.tunnel_edges):
             self._build_wall()
         else:
@@ -304,7 +314,43 @@ class FEModel:
             take = (better & inside) | preferred
             elem[take], ref[take] = e[take], xi[take]
             best = np.where(better, score, best)
+        lost = np.flatnonzero(elem < 0)
+        if lost.size and k < self.ne:
+            elem[lost], ref[lost] = self._locate_by_extent(points[lost], tol)
         return elem, ref
+
+    def _locate_by_extent(self, points: np.ndarray, tol: float):
+        """Points the nearest centroids did not contain, tried in every element whose extent holds them.
+        A long, thin element (a 0.5 m layer meshed at 10 m far from the tunnel) has its centroid farther
+        from a point inside it than a dozen smaller elements' centroids: the point was reported 'outside
+        the meshed ground' although it is inside. (The extent is widened by a quarter of its size, for
+        curved quadratic edges bulging past their nodes.) A point the case accepts on the tunnel wall or a
+        boundary within its tolerance (a relative 1e-6) may lie that little outside the meshed wall; within
+        ``SNAP`` of an element (in its reference coordinates) it is read at the element's nearest point,
+        as the displacement field is continuous there; farther out it stays outside."""
+        if self._extent is None:
+            xy = self.nodes[self.tri]  # (ne, nb, 2)
+            lo, hi = xy.min(axis=1), xy.max(axis=1)
+            pad = 0.25 * (hi - lo).max(axis=1, keepdims=True)
+            self._extent = (lo - pad, hi + pad)
+        lo, hi = self._extent
+        elem = -np.ones(len(points), np.int64)
+        ref = np.zeros((len(points), 2))
+        for i, p in enumerate(points):
+            cand = np.flatnonzero(np.all((lo <= p) & (p <= hi), axis=1))
+            if not cand.size:
+                continue
+            xi = self._inverse_map(cand, np.repeat(p[None, :], len(cand), axis=0))
+            score = np.column_stack([1 - xi.sum(axis=1), xi]).min(axis=1)
+            j = int(np.argmax(score))
+            if score[j] >= -tol:
+                elem[i], ref[i] = cand[j], xi[j]
+            elif score[j] >= -self.SNAP:
+                lam = np.maximum(np.array([1 - xi[j].sum(), *xi[j]]), 0.0)
+                elem[i], ref[i] = cand[j], lam[1:] / lam.sum()
+        return elem, ref
+
+    SNAP = 1e-4  # reference-coordinate distance within which a point just outside an element is read at its edge
 
     BRUTE_FORCE = 20000  # elements below which candidates are found by brute force (no KD-tree to import)
 
@@ -345,8 +391,7 @@ class FEModel:
         edges as the P2 field's gradient is)."""
         elem, ref = self.locate(points)
         if np.any(elem < 0):
-            bad = np.atleast_2d(np.asarray(points))[elem < 0][0]
-            raise ValueError(f"point ({bad[0]:g}, {bad[1]:g}) lies outside the meshed ground")
+            raise OutsideMesh(np.atleast_2d(np.asarray(points))[elem < 0][0])
         N, dN = reference_basis(self.element, ref.T)  # (nb, n), (nb, 2, n)
         nodes = self.tri[elem]  # (n, nb)
         if derivative is not None:  # dN/dx_d = sum_r dN/dxi_r dxi_r/dx_d (isoparametric map)

@@ -255,6 +255,17 @@ class PlasticSimulation(Simulation):
                 raise ForwardFailure(f"dilation angle psi[{layer}] = {psi:.4g} deg above the friction angle phi[{layer}] "
                                      f"= {phi:.4g} deg: not admissible")
 
+    def _check_releases(self, lam: np.ndarray) -> None:
+        """The engine releases the stress in increments: every stage must release more (a parameter
+        beta[stage] below the stage before it cannot be run: a point without solution)."""
+        names = [n or f"beta[{stage}]" for n, stage in zip(self.plan.release, self.stages)]
+        if lam[0] > 0 and np.all(np.diff(lam) > 0):
+            return
+        k = 0 if not lam[0] > 0 else int(np.flatnonzero(np.diff(lam) <= 0)[0]) + 1
+        before = f" after {names[k - 1]} = {lam[k - 1]:.4g}" if k else ""
+        raise ForwardFailure(f"the releases must increase from stage to stage with mohr-coulomb ground, found "
+                             f"{names[k]} = {lam[k]:.4g}{before}")
+
     # ------------------------------------------------------------------ forward
     def _names_to_compute(self, values: Mapping, wrt: Sequence[str]) -> tuple:
         """The values a new run differentiates: those asked, or for a readings-only run shortly after
@@ -282,6 +293,7 @@ class PlasticSimulation(Simulation):
         names = self._names_to_compute(values, wrt)
         self._check_strength(values)
         mat, sigma0, f, lam = self._inputs(values)
+        self._check_releases(np.real(lam))
         derivs = self._derivatives(values, names) if names else None
         self.counters.forward_runs += 1
         runs.number += 1

@@ -225,10 +225,10 @@ class Simulation(ABC):
         m = survey.m
         x = pred.x[:m]
         A_phys = pred.A[:m] if sensitivities and pred.A is not None else None
-        for name, v in values.items():
+        for name, v in values.items():  # (another instrument's terms: not this survey's readings, e.g. a view's)
             if v == 0:
                 continue
-            if is_constant(name):
+            if is_constant(name) and name in survey.constant_names:
                 x = x - survey.G[:, survey.constant_names.index(name)] * v
             elif name.startswith("bias[") and name in survey.error_names:
                 x = x + survey.bias_column(name) * v
@@ -236,14 +236,16 @@ class Simulation(ABC):
             return Prediction(x)
         A = np.zeros((len(x), len(wrt)))
         k = 0
-        for j, name in enumerate(wrt):
+        for j, name in enumerate(wrt):  # an instrument term of another survey's instrument: a zero column
             if is_constant(name):
-                A[:, j] = survey.constant_column(name)
+                if name in survey.constant_names:
+                    A[:, j] = survey.constant_column(name)
             elif name in survey.depth_rows:
                 rows, extra = survey.depth_rows[name]
                 A[rows, j] = pred.x[extra]
             elif is_instrument_error(name):
-                A[:, j] = survey.bias_column(name)
+                if name.startswith("bias[") and name in survey.error_names:
+                    A[:, j] = survey.bias_column(name)
             else:
                 A[:, j] = A_phys[:, k]
                 k += 1
@@ -332,6 +334,19 @@ def stage_survey(loaded, blocks, stages: list[str], fe) -> Survey:
     last stage); a block read at a stage the simulation does not compute is refused, located."""
     from geoback.observation.instruments import build_survey, case_blocks
 
+    from geoback.physics.fem import OutsideMesh
+
     blocks = blocks if blocks is not None else [b.at(stages[-1]) for b in case_blocks(loaded)]
     refuse_late_blocks(loaded, blocks, stages)
-    return build_survey(blocks, fe)
+    try:
+        return build_survey(blocks, fe)
+    except OutsideMesh as exc:  # the case's checks passed it: said with the instrument it belongs to
+        b = next((b for b in blocks if np.any(np.all(np.isclose(b.points, exc.point, rtol=0, atol=1e-12), axis=1))),
+                 None)
+        if b is None:
+            raise
+        x, y = exc.point
+        raise loaded.error(("instruments", b.index),
+                           f"expected every point instrument '{b.name}' reads inside the meshed ground, found "
+                           f"({x:g}, {y:g}) outside it; move the instrument into the ground (off the tunnel wall "
+                           f"and the model's edges)") from None

@@ -336,13 +336,32 @@ def _exceed(mean, std, alert):
     return np.where(np.isnan(alert), np.nan, np.where(std > 0, p, exact))
 
 
+def unusable_estimate(result) -> str:
+    """Why `result` has no estimate to forecast from, in words ('' when it has one). A fit that never
+    moved from the initial values has only the initial guess: forecasts there, with a band from the
+    sensitivities at the guess, would look like the readings' answer and are not. (A fit that moved but
+    stopped early - a time limit, the iteration limit - has its best point, and says so in its caveats.)
+    One statement for the library's ``forecast`` (refused) and `geoback run` (skipped, with a caveat)."""
+    if not result.fit.moved:
+        return ("the identification stopped without moving from the initial values (no step decreased J), so "
+                "there is no estimate to forecast from, only the initial guess; fix the case (initial values, "
+                "bounds, or fit method lm) and identify again")
+    return ""
+
+
 def forecast(analysis, result, draws: int | None = None, seconds: float = SECONDS, seed: int = 0,
              progress=None) -> Forecasts | None:
     """The case's forecasts at the estimate of `result` (an Identification of `analysis`): value,
     FOSM std and band, probability of exceeding the alert levels, and a sampling check through the
     model (`draws` parameter sets at most, within about `seconds`; 0 to skip). None without forecasts.
-    An identification of another case (or of a model with other quantities) is refused."""
+    An identification of another case (or of a model with other quantities), or one without an
+    estimate (``unusable_estimate``: a fit that never moved), is refused."""
+    from geoback.errors import GeobackError
+
     analysis.check_identification(result, "forecast")
+    why = unusable_estimate(result)
+    if why:
+        raise GeobackError(f"forecast: {why}")
     loaded = analysis.loaded
     if not loaded.case.forecasts:
         return None
