@@ -304,10 +304,11 @@ def test_twin_tunnels_far_apart_superpose_two_single_tunnels():
     a = 30.0
     sim = simulation(twin(a))
     trough = sim.predict(sim.quantities()).x
-    single = circle_section(width=120.0, depth=50.0, size=0.4, far=6.0,
-                            instruments=points([[abs(x - a), 0.0] for x in np.linspace(-30.0, 30.0, 13)]
-                                               + [[abs(x + a), 0.0] for x in np.linspace(-30.0, 30.0, 13)],
-                                               components=("uy",)))
+    xs = np.linspace(-30.0, 30.0, 13)
+    east = points([[abs(x - a), 0.0] for x in xs], components=("uy",))
+    west = points([[abs(x + a), 0.0] for x in xs], components=("uy",))
+    west[0]["name"] = "S2"
+    single = circle_section(width=120.0, depth=50.0, size=0.4, far=6.0, instruments=east + west)
     half = simulation(single)
     s = half.predict(half.quantities()).x
     superposed = s[:13] + s[13:]
