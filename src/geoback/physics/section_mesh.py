@@ -22,7 +22,7 @@ from geoback.case.schema import Case
 from geoback.physics.mesh import Mesh, cache_dir, gmsh_version, notice
 
 GMSH_CALLS = 0
-MESHER_VERSION = 2  # part of the cache key: raised when the meshing changes
+MESHER_VERSION = 3  # part of the cache key: raised when the meshing changes
 
 
 @dataclass(frozen=True)
@@ -155,8 +155,15 @@ def _run_gmsh(case: Case, inputs: dict, key: str) -> SectionMesh:
                 nxt = []
                 for piece in pieces:
                     inside, _ = occ.intersect([piece], [(2, half)], removeObject=False, removeTool=False)
-                    outside, _ = occ.cut([piece], [(2, half)], removeObject=True, removeTool=False)
-                    nxt += [s for s in inside + outside if s[0] == 2]
+                    outside, _ = occ.cut([piece], [(2, half)], removeObject=False, removeTool=False)
+                    made = [s for s in inside + outside if s[0] == 2 and s != piece]
+                    area = occ.getMass(*piece)
+                    if made and abs(sum(occ.getMass(*s) for s in made) - area) <= 1e-9 * area:
+                        occ.remove([piece], recursive=True)
+                        nxt += made
+                    else:  # wholly on one side of the cut (OpenCASCADE may then return nothing): kept as it is
+                        occ.remove(made, recursive=True)
+                        nxt.append(piece)
                 occ.remove([(2, half)], recursive=True)
                 pieces = nxt
             surfaces += pieces
