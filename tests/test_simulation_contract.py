@@ -61,15 +61,27 @@ def identified(loaded, sim) -> list[str]:
     return [sim.canonical(p.name) for p in loaded.case.parameters if not is_instrument_term(p.name)]
 
 
+def tunnel(loaded) -> tuple[float, float]:
+    """(radius, axis depth) of the tunnel: the circular tunnel's, or in a section with openings the first
+    opening's equivalent radius sqrt(area / pi) and the depth of its centroid."""
+    g = loaded.case.geometry
+    if hasattr(g, "openings"):
+        from geoback.case.layout import polygon
+
+        poly = polygon(g.openings[0])
+        return float(np.sqrt(poly.area / np.pi)), -poly.centroid.y
+    return g.radius, g.axis_depth
+
+
 def other_blocks(loaded, sim) -> list:
     """Instruments the case does not have: surface points and a point beside the tunnel (both
     components), read at the first stage and at the last."""
-    g = loaded.case.geometry
+    radius, axis = tunnel(loaded)
     n = len(loaded.case.instruments)
     surface = build_block(SimpleNamespace(kind="points", name="contract-surface", components=["ux", "uy"], sigma=1.0,
-                                          points=[[0.0, 0.0], [g.radius, 0.0], [3 * g.radius, 0.0]]), loaded, n)
+                                          points=[[0.0, 0.0], [radius, 0.0], [3 * radius, 0.0]]), loaded, n)
     side = build_block(SimpleNamespace(kind="points", name="contract-side", components=["ux", "uy"], sigma=1.0,
-                                       points=[[2 * g.radius, -g.axis_depth]]), loaded, n + 1)
+                                       points=[[2 * radius, -axis]]), loaded, n + 1)
     return [surface.at(sim.stages[0]), side.at(sim.stages[-1])]
 
 
@@ -205,7 +217,8 @@ def test_fields_have_the_shapes_of_their_mesh(built):
         np.testing.assert_array_equal(f.point_data[f"displacement[{sim.stages[-1]}]"], f.displacement)
     U = sim.stage_displacements(values)
     assert U.shape == (len(sim.stages), sim.fe.nfree)
-    pts = np.array([[0.0, 0.0], [2 * loaded.case.geometry.radius, -loaded.case.geometry.axis_depth]])
+    radius, axis = tunnel(loaded)
+    pts = np.array([[0.0, 0.0], [2 * radius, -axis]])
     for k, stage in enumerate(sim.stages):
         at = sim.stage_displacements_at(values, pts, stage)
         assert at.shape == (2, 2)

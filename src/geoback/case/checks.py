@@ -299,11 +299,6 @@ def _section_problems(case: Case, allow_large: bool) -> list[tuple[tuple, str]]:
             problems.append((("geometry", field), f"expected at most {MAX_SIZE:g} m (lengths are in metres), "
                                                   f"found {field} {number_text(value)}"))
     problems.extend(_layer_problems(case))
-    for i, layer in enumerate(case.ground.layers):
-        if layer.model != "linear-elastic":
-            problems.append((("ground", "layers", i, "model"),
-                             f"expected linear-elastic ground with openings (mohr-coulomb ground is modelled for the "
-                             f"circular tunnel's geometry only, so far), found {layer.model}"))
     if problems:
         return problems
     problems.extend(layout_problems(case))

@@ -83,10 +83,12 @@ class Work:
 
         check = case.fit.mesh_error != "ignore"
         if is_plastic(case):
-            releases = [1.0] if case.construction is None else \
-                [float(s.release) for s in case.construction.stages if s.release is not None] or [1.0]
-            releases = np.clip(np.nan_to_num(np.asarray(releases, float), nan=1.0, posinf=1.0), 0.0, 1e3)
-            steps = np.diff(np.concatenate([[0.0], np.maximum.accumulate(releases)]))
+            steps = _opening_steps(case) if hasattr(case.geometry, "openings") else None
+            if steps is None:
+                releases = [1.0] if case.construction is None else \
+                    [float(s.release) for s in case.construction.stages if s.release is not None] or [1.0]
+                releases = np.clip(np.nan_to_num(np.asarray(releases, float), nan=1.0, posinf=1.0), 0.0, 1e3)
+                steps = np.diff(np.concatenate([[0.0], np.maximum.accumulate(releases)]))
             return cls("mohr-coulomb", int(sum(stage_increments(steps))), check)
         if case.construction is not None:
             return cls("staged", len(case.construction.stages), check)
@@ -120,6 +122,19 @@ class Work:
         return (f"{PHYSICS_WORDS[self.physics]}: up to {self.increments} load increments a forward run (about "
                 f"{self.factorisations} factorisations, ~{_seconds(self.forward_seconds(dofs))}; a fit takes 10 to "
                 f"30 forward runs)")
+
+
+def _opening_steps(case: Case):
+    """The largest fraction each stage of a case with openings releases of any group (the increments of
+    ``excavation_plastic.py`` follow it), or None if the construction does not read (its checks say why)."""
+    from geoback.case.sequence import Sequence
+
+    try:
+        frac = np.real(Sequence.of(case).fractions(Sequence.of(case).values))
+    except Exception:  # noqa: BLE001 - a construction that does not read is refused by its own checks
+        return None
+    steps = np.diff(np.vstack([np.zeros((1, frac.shape[1])), frac]), axis=0).max(axis=1, initial=0.0)
+    return np.clip(np.nan_to_num(steps, nan=1.0, posinf=1.0), 0.0, 1e3)
 
 
 def _seconds(s: float) -> str:

@@ -368,7 +368,9 @@ class ExcavationSimulation(Simulation):
         for k, step in enumerate(plan.steps):
             mat = self._material(k)
             if step.excavate or step.remove:
-                gone = np.flatnonzero((prev_mat >= 0) & (mat < 0))
+                # removed, or ground replaced by a lining installed in the stage that excavates it (its
+                # ground stress is released like the rest of the part's; the lining starts stress-free)
+                gone = np.flatnonzero((prev_mat >= 0) & (mat != prev_mat))
                 loads.append(self._removal_load(gone, prev_mat, st, u, uref) * np.real(release))
                 dl = np.zeros((n, nw))
                 for j, d in enumerate(dsts):

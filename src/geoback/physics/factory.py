@@ -36,7 +36,13 @@ def _has_openings(case) -> bool:
     return hasattr(case.geometry, "openings")
 
 
+def _yielding_openings(case) -> bool:
+    return _has_openings(case) and is_plastic(case)
+
+
 IMPLEMENTATIONS: tuple[Implementation, ...] = (
+    Implementation("yielding-excavation", "geoback.physics.excavation_plastic", "YieldingExcavationSimulation",
+                   _yielding_openings, "cases/plastic-heading-bench.yaml"),  # openings in mohr-coulomb ground
     Implementation("excavation", "geoback.physics.excavation", "ExcavationSimulation", _has_openings,
                    "cases/natm-heading-bench.yaml"),  # openings of any shape, element removal, stages
     Implementation("plastic", "geoback.physics.plastic", "PlasticSimulation", is_plastic,
@@ -57,7 +63,9 @@ def make_simulation(loaded, mesh=None, backend: str | None = None, blocks=None, 
     """The simulation a case asks for (``IMPLEMENTATIONS``), with the extension table of `geoback
     diagnose` available (``physics/extensions.py``) unless another table is given: the one-step
     linear-elastic excavation, the staged one (``staged.py``) when the case has a construction
-    section, or the elastoplastic one (``plastic.py``, stages included) when a layer is mohr-coulomb."""
+    section, or the elastoplastic one (``plastic.py``, stages included) when a layer is mohr-coulomb;
+    for a section with openings, element removal (``excavation.py``), in yielding ground when a layer is
+    mohr-coulomb (``excavation_plastic.py``)."""
     from geoback.physics.extensions import EXTENSIONS
 
     cls = implementation(loaded.case).load()

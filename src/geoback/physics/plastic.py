@@ -37,10 +37,10 @@ assessment and the outputs ask for it again after rejected trial points, and get
 run, which could fail where this one converged). A run longer than ``FIRST_WORDS`` seconds says
 where it is (stage k of n, increment, Newton iteration) every ``EVERY`` seconds through
 ``case.budget.say``, and stops with ``errors.TimeLimit`` where it is once the command's time limit
-and its grace have passed (``_Watch``, the engine's observer).
+and its grace have passed (``Watch``, the engine's observer).
 
 Composition: the case's ``Domain`` (``domain.py``), the quadrature-point operators, and the last runs
-with their warm start (``_Runs``), shared with views on other instruments (``Simulation.surveying``:
+with their warm start (``Runs``), shared with views on other instruments (``Simulation.surveying``:
 nothing survey-dependent is cached, so a view reads the last run without a new one). Names are
 resolved by ``Names`` over the plan, the strength and the ground. Not modelled: a lining on yielding
 ground (refused by the case checks), cross-anisotropic elasticity.
@@ -76,7 +76,7 @@ UNMODELLED = ("n", "m")  # extensions not available with yielding ground (cross-
 _CONTROLLERS: dict = {}
 
 
-def _one_thread(pardiso: bool):
+def one_thread(pardiso: bool):
     """One thread for BLAS, MKL (PARDISO) and OpenMP during an elastoplastic run: its many
     factorisations, back-substitutions and point-wise updates gain little from a second thread and
     lose much when the cores are shared (measured at 17 k DOFs on two busy cores: a forward run in
@@ -103,7 +103,7 @@ class _Run:
     result: object  # plasticity.Result
 
 
-class _Runs:
+class Runs:
     """The last run, the last run whose sensitivities were asked for (an optimiser's accepted point:
     asked for again after rejected trials, by the assessment and the outputs, and never solved
     twice), the warm start they offer, and the names asked last (``solution``)."""
@@ -123,7 +123,7 @@ class _Runs:
         return None
 
 
-class _Watch:
+class Watch:
     """A run's progress lines (after FIRST_WORDS seconds, then every EVERY seconds: stage, increment,
     Newton iteration) and its time limit (``geoback.case.budget``: past it, the run stops where it is)."""
 
@@ -192,7 +192,7 @@ class PlasticSimulation(Simulation):
         self._point_layer = np.repeat(self.fe.region, self.ops.nq)
         self.timings["assembly"] += time.perf_counter() - t0
         self.options = Options(schedule=self._schedule(increments), refine=True, backend=backend)
-        self._runs = _Runs()
+        self._runs = Runs()
         self._backend = backend or default_backend(self.fe.nfree)
         self._pardiso = self._backend == "pardiso"
 
@@ -297,9 +297,9 @@ class PlasticSimulation(Simulation):
         derivs = self._derivatives(values, names) if names else None
         self.counters.forward_runs += 1
         runs.number += 1
-        watch = _Watch(runs.number, self.stages)
+        watch = Watch(runs.number, self.stages)
         try:
-            with _one_thread(self._pardiso):
+            with one_thread(self._pardiso):
                 res = solve(self.fe, mat, sigma0, f, lam, derivatives=derivs, options=self.options,
                             operators=self.ops, warm=runs.warm, observer=watch)
         except NonConvergence as exc:

@@ -22,7 +22,7 @@ from geoback.case.schema import Case
 from geoback.physics.mesh import Mesh, cache_dir, gmsh_version, notice
 
 GMSH_CALLS = 0
-MESHER_VERSION = 4  # part of the cache key: raised when the meshing changes
+MESHER_VERSION = 5  # part of the cache key: raised when the meshing changes
 
 
 @dataclass(frozen=True)
@@ -156,12 +156,14 @@ def _run_gmsh(case: Case, inputs: dict, key: str) -> SectionMesh:
                 for piece in pieces:  # (OCC may return a piece the line misses as itself: keep it then)
                     inside, _ = occ.intersect([piece], [(2, half)], removeObject=False, removeTool=False)
                     outside, _ = occ.cut([piece], [(2, half)], removeObject=False, removeTool=False)
-                    made = [s for s in inside + outside if s[0] == 2]
-                    if not made:  # a piece wholly on one side: OCC's booleans return nothing then
-                        made = [piece]
-                    elif piece not in made:
+                    made = [s for s in inside + outside if s[0] == 2 and s != piece]
+                    area = occ.getMass(*piece)
+                    if made and abs(sum(occ.getMass(*s) for s in made) - area) <= 1e-9 * area:
                         occ.remove([piece], recursive=True)
-                    nxt += made
+                        nxt += made
+                    else:  # wholly on one side of the cut (OpenCASCADE may then return nothing): kept as it is
+                        occ.remove(made, recursive=True)
+                        nxt.append(piece)
                 occ.remove([(2, half)], recursive=True)
                 pieces = nxt
             surfaces += pieces

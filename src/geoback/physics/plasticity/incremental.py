@@ -16,7 +16,9 @@ lambda_{i-1}), s in (0, 1] (the *schedule*). Each increment is solved by full Ne
 consistent tangent K_t = int B^t C_alg B dV (C_alg = d sigma_{n+1} / d strain, non-symmetric
 when psi != phi), starting with the tangent of the last converged state, until
 
-    || R ||_2  <=  tol || lambda_{n+1} f ||_2          (tol = 1e-10 by default).           (2)
+    || R ||_2  <=  tol || lambda_{n+1} f ||_2          (tol = 1e-10 by default),           (2)
+
+or, with ``floor``, until a residual below floor || lambda_{n+1} f || no longer halves (the rounding floor).
 
 A Newton that fails (``max_iterations`` reached, residual not finite or growing 1e6-fold) is
 retried with half the increment (adaptive schedule, or a fixed one with ``refine``) down to
@@ -82,7 +84,8 @@ None, ``sigma`` (n_stages, ne, nq, 4), ``plastic`` / ``yielded`` (n_stages, ne, 
 (yielding in the stage's last increment / at any increment so far), ``increments`` (log of
 every Newton attempt with its residual history), ``schedule`` (to replay), ``counters``
 (factorisations, back-substitutions, Newton iterations, increments, cutbacks, apex points, warm
-starts, seconds by part), ``warm`` (every increment's solution). Raises :class:`NonConvergence`
+starts, seconds by part), ``warm`` (every increment's solution), ``dsigma`` (d sigma/dp at the end,
+(npts, 4, n_params), or None). Raises :class:`NonConvergence`
 (a ``ForwardFailure``, itself a ``GeobackError``) or ``ValueError`` for
 inputs of the wrong shape, non-increasing stages or an initial stress outside the yield surface.
 
@@ -141,6 +144,9 @@ class Options:
     schedule: tuple | None = None  # fixed: per stage, increasing fractions s in (0, 1], ending at 1
     refine: bool = False  # a fixed schedule's failed increment is halved (down to min_increment) instead of failing
     backend: str | None = None  # 'pardiso' | 'scipy' | None (plasticity.linear.default_backend)
+    floor: float | None = None  # a residual (2) below this that no longer halves in an iteration counts as converged:
+    # the rounding floor, for a tolerance asked below it (a replay for finite differences: Newton then goes to the
+    # floor, wherever that is, instead of stopping anywhere below a looser tolerance)
 
 
 @dataclass
@@ -188,6 +194,8 @@ class Result:
     counters: Counters
     tol: float
     warm: dict = field(default_factory=dict)  # (stage index, s) -> u at the end of every converged increment
+    dsigma: np.ndarray | None = None  # (npts, 4, n_params) d sigma/dp at the end of the last stage (the history (3)
+    # a later computation continues from: element removal in stages, ``excavation_plastic.py``)
 
     def converged_residuals(self) -> np.ndarray:
         """Final relative residual of every converged increment."""
@@ -272,9 +280,10 @@ class _Failed(Exception):
 
 
 class _Problem:
-    def __init__(self, ops, mat, sigma0, f, opts, counters):
+    def __init__(self, ops, mat, sigma0, f, opts, counters, f_before=None):
         self.ops, self.mat, self.sigma0, self.f, self.opts, self.counters = ops, mat, sigma0, f, opts, counters
         self.f_norm = np.linalg.norm(f)
+        self.f_before = f_before  # the load released before this run (only what (2) is measured against)
         self._w = None  # K_e^-1 f and its strain, once asked (elastic_response)
         with counters.timed("assemble tangent"):
             self.Ke_elastic = ops.element_matrices(mc.elastic_matrix(mat))
@@ -301,8 +310,12 @@ class _Problem:
         return self._w
 
     def reference(self, lam: float) -> float:
-        """What the residual (2) is measured against: |lambda| ||f||, at least LAM_FLOOR ||f||."""
-        return max(abs(lam), LAM_FLOOR) * self.f_norm
+        """What the residual (2) is measured against: |lambda| ||f||, at least LAM_FLOOR ||f||; after a
+        load f_before released by earlier runs (``solve(f_before=...)``), ||f_before + lambda f||, at least
+        LAM_FLOOR ||f_before + f||: the whole load released so far, as in one run."""
+        if self.f_before is None:
+            return max(abs(lam), LAM_FLOOR) * self.f_norm
+        return max(np.linalg.norm(self.f_before + lam * self.f), LAM_FLOOR * np.linalg.norm(self.f_before + self.f))
 
     def elastic_step(self, state: _State, lam: float, elastic: LU) -> _Converged | None:
         """The increment state.lam -> lam as one linear step u += (lam - state.lam) K_e^-1 f, for an
@@ -361,7 +374,8 @@ class _Problem:
                 observer(it, rel)
             if not np.isfinite(rel):
                 raise _Failed(residuals, "residual not finite")
-            if rel <= opts.tol:
+            if rel <= opts.tol or (opts.floor is not None and rel <= opts.floor and it > 1
+                                   and rel > 0.5 * residuals[-2]):  # (at the rounding floor: it no longer falls)
                 return _Converged(u, sigma, deps, mode, C, residuals, lu is work)
             if rel > 1e6 * residuals[0] and it > 1:
                 raise _Failed(residuals, "residual grew a million-fold")
@@ -413,8 +427,10 @@ class Progress:
 
 def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = None,
           options: Options | None = None, operators: PointOperators | None = None,
-          warm: dict | None = None, observer=None) -> Result:
-    """Release f in increments up to each of `stages`; see the module docstring. `warm`: the
+          warm: dict | None = None, observer=None, f_before: np.ndarray | None = None) -> Result:
+    """Release f in increments up to each of `stages`; see the module docstring. `f_before`: a load
+    (nfree,) released before this run from a state of which sigma0 is the stress (a stage of a longer
+    construction): the residual (2) is then measured against ||f_before + lambda f||. `warm`: the
     ``Result.warm`` of an earlier run at nearby values (same schedule): each increment's Newton
     iteration starts from that run's solution of it when its residual is smaller there.
     `observer(Progress)`: called after every Newton iteration and converged increment (progress
@@ -424,7 +440,9 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
     counters = Counters()
     mat, sig0, f, stages = _check(ops, material, sigma0, f, stages, opts)
     der = _derivatives(derivatives, ops, len(stages))
-    problem = _Problem(ops, mat, sig0, f, opts, counters)
+    if f_before is not None and np.shape(f_before) != (ops.nfree,):
+        raise ValueError(f"f_before: expected shape ({ops.nfree},), found {np.shape(f_before)}")
+    problem = _Problem(ops, mat, sig0, f, opts, counters, f_before)
     state = _State(np.zeros(ops.nfree), sig0.copy(), 0.0)
     if der is not None:
         P = len(der.names)
@@ -519,7 +537,7 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
         work.release()
     return Result(stages, np.array(out["u"]), np.array(out["du"]) if der else None, der.names if der else [],
                   np.array(out["sigma"]), np.array(out["plastic"]), np.array(out["yielded"]), logs,
-                  tuple(schedule), counters, opts.tol, solved)
+                  tuple(schedule), counters, opts.tol, solved, state.dsigma if der else None)
 
 
 def _sensitivities(problem: _Problem, der: _Derivatives, old: _State, new: _State, res: _Converged, lu: LU):

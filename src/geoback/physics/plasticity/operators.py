@@ -11,7 +11,9 @@ weights (|det J| times the reference weight):
     tangent             K(C)     = sum_points w B^t C B                    = int B^t C B dV
 
 with C (3x3 per point) the in-plane rows of d sigma / d strain, possibly non-symmetric; K is
-returned as a full CSR matrix on the free dofs with a fixed sparsity pattern.
+returned as a full CSR matrix on the free dofs with a fixed sparsity pattern. ``restricted`` gives the
+same operators for a subset of the elements on the dofs they hold (a stage's body when elements are
+removed and activated: ``excavation_plastic.py``).
 """
 from __future__ import annotations
 
@@ -40,6 +42,12 @@ class PointOperators:
         self.npts = self.ne * self.nq
         self.nfree = fe.nfree
         self._redofs = fe.free_index[fe.edofs]  # (ne, 2nb), -1 at fixed dofs
+        self.elements = None  # the elements of fe these operators cover (None: all of them)
+        self._index()
+
+    def _index(self) -> None:
+        """The sparse strain operator and the tangent's pattern from B, w and the element dofs."""
+        nb2 = self.B.shape[-1]
 
         # B as a sparse (3 npts x nfree) operator: strains = Bs u, forces = Bs^t (w sigma)
         rows = (np.arange(self.npts * 3).reshape(self.ne, self.nq, 3)[..., None]
@@ -61,6 +69,30 @@ class PointOperators:
         rows_u = uniq // self.nfree
         self._indptr = np.concatenate([[0], np.cumsum(np.bincount(rows_u, minlength=self.nfree))]).astype(np.int32)
         self.nnz = len(uniq)
+
+    def restricted(self, elements: np.ndarray, dofs: np.ndarray) -> "PointOperators":
+        """The operators of the body made of `elements` (indices into fe's elements) on the free dofs
+        `dofs` (indices into fe's free numbering, increasing; every free dof of those elements among
+        them), renumbered 0 .. len(dofs) - 1: points numbered element by element in the order of
+        `elements`. What element removal and activation work with (a stage's active body)."""
+        elements = np.asarray(elements, np.int64)
+        dofs = np.asarray(dofs, np.int64)
+        new = object.__new__(PointOperators)
+        new.fe = self.fe
+        new.elements = elements if self.elements is None else self.elements[elements]
+        new.ne = len(elements)
+        new.B, new.w = self.B[elements], self.w[elements]
+        new.nq = self.nq
+        new.npts = new.ne * new.nq
+        new.nfree = len(dofs)
+        relabel = -np.ones(self.nfree + 1, np.int64)  # (the last entry: a fixed dof, -1, stays -1)
+        relabel[dofs] = np.arange(len(dofs))
+        old = self._redofs[elements]
+        new._redofs = relabel[old]
+        if np.any((old >= 0) & (new._redofs < 0)):
+            raise ValueError("restricted: a free dof of the elements is not among `dofs`")
+        new._index()
+        return new
 
     # ------------------------------------------------------------------ fields
     def strain(self, u: np.ndarray) -> np.ndarray:
@@ -105,7 +137,8 @@ class PointOperators:
     def point_coordinates(self) -> np.ndarray:
         """(npts, 2) coordinates of the quadrature points."""
         N, _ = reference_basis(self.fe.element, self.fe._X)  # (nb, nq)
-        xy = np.einsum("enx,nq->eqx", self.fe.nodes[self.fe.tri], N)
+        tri = self.fe.tri if self.elements is None else self.fe.tri[self.elements]
+        xy = np.einsum("enx,nq->eqx", self.fe.nodes[tri], N)
         return xy.reshape(-1, 2)
 
     def per_point(self, values, name: str = "value") -> np.ndarray:
