@@ -200,7 +200,10 @@ class Layout(Strict):
 
 
 def _geometry_shape(value: Any) -> str:
-    return "layout" if isinstance(value, dict) and "openings" in value else "circular"
+    """'layout' for a geometry with openings (a mapping while validating, a Layout while serialising)."""
+    if isinstance(value, dict):
+        return "layout" if "openings" in value else "circular"
+    return "layout" if hasattr(value, "openings") else "circular"
 
 
 GROUND_MODELS = ("linear-elastic", "mohr-coulomb")
