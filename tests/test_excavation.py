@@ -17,6 +17,7 @@ finite differences:
 from __future__ import annotations
 
 import copy
+import re
 import math
 
 import numpy as np
@@ -227,7 +228,8 @@ LINED = dict(stages=[{"name": "heading", "excavate": ["heading"], "release": 0.4
 def lined():
     instruments = points(SURFACE + [[0.0, -8.0], [8.0, -15.0], [-6.0, -20.0]], stage=None)
     ins = [dict(instruments[0], readings={s: [0.0] * 16 for s in ("heading", "heading-lined", "bench", "closed")})]
-    ins.append({"name": "C1", "kind": "convergence", "points": [[-4.9, -15.5], [4.9, -15.5]], "sigma": 0.001,
+    wall = -3.0 + math.sqrt(64.0 - 0.5 ** 2)  # the side wall (radius 8 about (-3, -15)) 0.5 m below the springline
+    ins.append({"name": "C1", "kind": "convergence", "points": [[-wall, -15.5], [wall, -15.5]], "sigma": 0.001,
                 "readings": {"heading": [0.0], "heading-lined": [0.0]}})
     return simulation(natm(instruments=ins, **LINED))
 
@@ -398,3 +400,48 @@ def test_mirrored_readings_in_a_half_model(capsys):
     assert "mirror images" in capsys.readouterr().err
     assert x[0, 1] == pytest.approx(x[1, 1], rel=1e-12) and x[0, 0] == pytest.approx(-x[1, 0], rel=1e-12)
     assert x[2, 0] == pytest.approx(-x[3, 0], rel=1e-12) and x[3, 0] < 0  # the wall moves in
+
+
+@pytest.mark.parametrize("lined_section", [False, True])
+def test_every_part_and_band_is_meshed_with_its_area(lined_section):
+    """The mesh's parts and lining bands cover the layout's polygons (a part the cut lines leave whole, or
+    an OpenCASCADE boolean returning nothing, would otherwise vanish into the ground)."""
+    from geoback.case import layout as lay
+
+    data = natm(**LINED) if lined_section else natm()
+    case = case_from_data(data)
+    sim = simulation(data)
+    mesh, fe = sim.mesh, sim.fe
+    area = fe.element_quadrature(np.arange(fe.ne))[3].sum(axis=1)
+    regions = lay.regions(case.geometry)
+    for k, name in enumerate(mesh.part_names):
+        half = regions[name][1].intersection(lay.ground_polygon(case.geometry)).area
+        assert area[mesh.part == k].sum() == pytest.approx(half, rel=2e-3), name
+    if lined_section:
+        from geoback.case.sequence import Sequence
+
+        for k, (name, ln) in enumerate(Sequence.of(case).linings.items()):
+            band = lay.lining_band(case.geometry, ln).intersection(lay.ground_polygon(case.geometry)).area
+            assert mesh.band_names[k] == name
+            assert area[mesh.band == k].sum() == pytest.approx(band, rel=0.05), name
+
+
+def test_validate_refuses_a_bad_sequence_with_file_line_and_exit_2(tmp_path):
+    """The command line: `geoback validate` on a section whose lining is installed before its part is
+    dug says where (file:line:column: field), what was expected and found, exit 2, no traceback."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    data = natm(stages=[{"name": "a", "install": ["shotcrete"]}, {"name": "b", "excavate": ["tunnel"]}],
+                linings=[{"name": "shotcrete", "on": "heading", "thickness": 0.25, "E": "10 GPa", "nu": 0.2}])
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    out = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "validate", str(path)], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert "Traceback" not in out.stderr
+    assert re.search(r"bad\.yaml:\d+:\d+: construction\.stages\[0\]\.install\[0\]: expected lining 'shotcrete' "
+                     r"installed at or after the excavation of 'heading', found 'heading' not yet excavated",
+                     out.stderr + out.stdout)

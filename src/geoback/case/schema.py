@@ -200,10 +200,9 @@ class Layout(Strict):
 
 
 def _geometry_shape(value: Any) -> str:
-    """'layout' for a geometry with openings (a mapping while validating, a Layout while serialising)."""
-    if isinstance(value, dict):
-        return "layout" if "openings" in value else "circular"
-    return "layout" if hasattr(value, "openings") else "circular"
+    """Which geometry a value is (a mapping when validating, a model when serialising)."""
+    openings = "openings" in value if isinstance(value, dict) else hasattr(value, "openings")
+    return "layout" if openings else "circular"
 
 
 GROUND_MODELS = ("linear-elastic", "mohr-coulomb")

@@ -126,6 +126,32 @@ class Sequence:
                 out[k, g] = b
         return out
 
+    def describe(self) -> list[str]:
+        """The construction in words, one line a stage, defaults said (what `validate` echoes)."""
+        frac = self.fractions(self.values)
+        lines = []
+        for k, st in enumerate(self.steps):
+            did = []
+            if st.excavate:
+                did.append("excavates " + ", ".join(st.excavate))
+            if st.remove:
+                did.append("removes " + ", ".join(st.remove))
+            if st.install:
+                did.append("installs " + ", ".join(st.install))
+            released = []
+            for g in st.releases:
+                what = "its load" if self.groups[g] == k else f"the load of stage '{self.steps[self.groups[g]].name}'"
+                how = f"{st.release}" if st.release else "by default"
+                released.append(f"{what} to {100 * float(frac[k, g]):g} % ({how})")
+            if released:
+                did.append("releases " + "; ".join(released))
+            lines.append(f"stage '{st.name}': " + (", ".join(did) if did else "nothing"))
+        held = [g for g in range(len(self.groups)) if float(frac[-1, g]) < 1.0]
+        for g in held:
+            lines.append(f"at the last stage {100 * (1 - float(frac[-1, g])):g} % of the load of stage "
+                         f"'{self.steps[self.groups[g]].name}' is still held (not released)")
+        return lines
+
     def fractions_derivative(self, name: str) -> np.ndarray:
         """d fractions / d beta[stage] (the map is linear in each beta)."""
         base = {s.release: 0.0 for s in self.steps if s.release}

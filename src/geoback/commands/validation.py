@@ -47,8 +47,13 @@ def check_case(loaded: LoadedCase) -> str:
     warned = "".join(f"\nwarning: [{c.code}] {c.message}" for c in analysis.notices)
     read = sum(n.count for n in report.notes)
     matched = "".join(f"\n  {n.text()}" for n in report.notes)
+    built = ""
+    if hasattr(case.geometry, "openings"):  # what each stage does, the defaults said
+        from geoback.case.sequence import Sequence
+
+        built = "\nconstruction:" + "".join(f"\n  {line}" for line in Sequence.of(case).describe())
     return (f"{name}: valid ({len(case.instruments)} instruments, {read} readings, "
-            f"{len(case.parameters)} parameters, {mesh_text}){matched}{warned}\n{cost_text(est)}")
+            f"{len(case.parameters)} parameters, {mesh_text}){matched}{built}{warned}\n{cost_text(est)}")
 
 
 def cost_text(est) -> str:

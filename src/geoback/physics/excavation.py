@@ -41,7 +41,7 @@ from geoback.physics.fem import FEModel
 from geoback.physics.ground import COMPLEX_STEP, Ground, plane_strain_isotropic
 from geoback.physics.names import Names
 from geoback.physics.simulation import Counters, Field, Prediction, Simulation, stage_survey
-from geoback.physics.stiffness import FactorCache
+from geoback.physics.stiffness import FactorCache, proportion
 
 NEVER = 1e9  # removal stage of an element no stage removes
 
@@ -133,32 +133,22 @@ class ExcavationSimulation(Simulation):
         return out
 
     def _check_survey(self) -> None:
-        """A reading of ground already excavated at its stage is refused, located."""
-        survey, fe = self.survey, self.fe
-        stage = self.domain.row_stage
-        P = survey.P.tocsr()
-        for r in range(P.shape[0]):
-            cols = P.indices[P.indptr[r]:P.indptr[r + 1]]
-            if not len(cols):
-                continue
-            nodes = np.unique(fe.free[cols] // 2)
-            elems = self._elements_of(nodes)
-            if elems.size and np.all(self.removed_at[elems] <= stage[r]):
-                lab = survey.labels[r]
-                block = next(b for b in survey.blocks if b.name == lab.instrument)
-                raise self.loaded.error(("instruments", block.index),
-                                        f"{block.kind} '{lab.instrument}': expected readings in the ground, found "
-                                        f"a point at ({lab.x:g}, {lab.y:g}) in ground excavated by stage "
-                                        f"'{self.stages[stage[r]]}'")
-
-    def _elements_of(self, nodes: np.ndarray) -> np.ndarray:
-        if not hasattr(self, "_node_elems"):
-            tri = self.fe.tri
-            order = np.argsort(tri.ravel(), kind="stable")
-            self._node_elems = (np.sort(tri.ravel()), order // tri.shape[1])
-        keys, elems = self._node_elems
-        lo, hi = np.searchsorted(keys, nodes, "left"), np.searchsorted(keys, nodes, "right")
-        return np.unique(np.concatenate([elems[a:b] for a, b in zip(lo, hi)])) if len(nodes) else np.zeros(0, int)
+        """A reading of ground already excavated at its stage is refused, located (the point named)."""
+        fe = self.fe
+        stages = list(self.plan.names)
+        for b in self.survey.blocks:
+            elem, _ = fe.locate(b.points)
+            k = stages.index(b.stage)
+            gone = np.flatnonzero((elem >= 0) & (self.removed_at[np.maximum(elem, 0)] <= k))
+            if len(gone):
+                x, y = b.points[gone[0]]
+                stage = stages[int(self.removed_at[elem[gone[0]]])]
+                what = "point" if b.kind in ("points", "convergence") else "station"
+                raise self.loaded.error(("instruments", b.index),
+                                        f"{b.kind} '{b.name}': expected readings of the ground at stage '{b.stage}', "
+                                        f"found {what} {gone[0] + 1} at ({x:g}, {y:g}) in ground excavated by stage "
+                                        f"'{stage}'" + (" (mirrored from x < 0)" if self.loaded.case.geometry.model == "half"
+                                                         else ""))
 
     @property
     def solver(self) -> str | None:
@@ -230,6 +220,12 @@ class ExcavationSimulation(Simulation):
     # ------------------------------------------------------------------ configurations
     def _material(self, k: int) -> np.ndarray:
         """Material of every element during stage k's release: -1 off, 0 ground, 1 + i lining i."""
+        cache = self._memo.setdefault("material", {})
+        if k not in cache:
+            cache[k] = self._materials(k)
+        return cache[k]
+
+    def _materials(self, k: int) -> np.ndarray:
         mesh, plan = self.mesh, self.plan
         mat = np.where(self.removed_at <= k, -1, 0)
         names = list(mesh.band_names)
@@ -250,7 +246,15 @@ class ExcavationSimulation(Simulation):
         return out
 
     def _active(self, mat: np.ndarray) -> np.ndarray:
-        """Free dofs (indices into the free numbering) of nodes that active elements hold."""
+        """Free dofs (indices into the free numbering) of nodes that active elements hold (remembered by
+        configuration)."""
+        key = mat.tobytes()
+        cache = self._memo.setdefault("active", {})
+        if key not in cache:
+            cache[key] = self._active_dofs(mat)
+        return cache[key]
+
+    def _active_dofs(self, mat: np.ndarray) -> np.ndarray:
         fe = self.fe
         nodes = np.unique(fe.tri[mat >= 0])
         dofs = np.sort(np.concatenate([2 * nodes, 2 * nodes + 1]))
@@ -393,9 +397,15 @@ class ExcavationSimulation(Simulation):
                     rhs = dg[act].copy()
                     full_step = np.zeros(n)
                     full_step[act] = step_u
+                    real = np.real(coeffs)
                     for j, d in enumerate(dsts):
                         dc = self._coeffs(mat, d)
-                        if np.any(dc):
+                        if not np.any(dc):
+                            continue
+                        alpha = proportion(dc, real)
+                        if alpha is not None:  # dK = alpha K (a modulus scaling the whole configuration): dK du = alpha g
+                            rhs[:, j] -= alpha * g[act]
+                        else:
                             dK = fe.matrix(dc)[act][:, act]
                             rhs[:, j] -= FEModel.symmetric_product(dK.tocsr(), step_u)
                     du[act] += counted_solve(self.counters, fact, s, rhs)

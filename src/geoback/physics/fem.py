@@ -285,7 +285,9 @@ class FEModel:
     def locate(self, points: np.ndarray, tol: float = 1e-9):
         """Element and reference coordinates of each point; element -1 where outside the mesh."""
         points = np.atleast_2d(np.asarray(points, float))
-        k = min(12, self.ne)
+        # with priorities (elements excavated at different stages), a point on a wall is held by small
+        # elements of an opening's lining as well: look further for the ground's
+        k = min(12 if not np.any(self.priority != self.priority[0]) else 40, self.ne)
         cand = self._nearest_elements(points, k)
         elem = -np.ones(len(points), np.int64)
         ref = np.zeros((len(points), 2))
@@ -297,8 +299,9 @@ class FEModel:
             score = lam.min(axis=1)
             better = (score > best) & (elem < 0)
             inside = score >= -tol
-            preferred = (elem >= 0) & (self.priority[e] > self.priority[np.maximum(elem, 0)])
-            take = (better | preferred) & inside
+            # a point on a wall (within 1e-6 of an element's size of it) is read from the element that stays longer
+            preferred = (elem >= 0) & (self.priority[e] > self.priority[np.maximum(elem, 0)]) & (score >= -1e-6)
+            take = (better & inside) | preferred
             elem[take], ref[take] = e[take], xi[take]
             best = np.where(better, score, best)
         return elem, ref

@@ -22,7 +22,7 @@ from geoback.case.schema import Case
 from geoback.physics.mesh import Mesh, cache_dir, gmsh_version, notice
 
 GMSH_CALLS = 0
-MESHER_VERSION = 2  # part of the cache key: raised when the meshing changes
+MESHER_VERSION = 4  # part of the cache key: raised when the meshing changes
 
 
 @dataclass(frozen=True)
@@ -153,10 +153,15 @@ def _run_gmsh(case: Case, inputs: dict, key: str) -> SectionMesh:
             for a, b in op.cuts:
                 half = _half_plane(occ, a, b, poly)
                 nxt = []
-                for piece in pieces:
+                for piece in pieces:  # (OCC may return a piece the line misses as itself: keep it then)
                     inside, _ = occ.intersect([piece], [(2, half)], removeObject=False, removeTool=False)
-                    outside, _ = occ.cut([piece], [(2, half)], removeObject=True, removeTool=False)
-                    nxt += [s for s in inside + outside if s[0] == 2]
+                    outside, _ = occ.cut([piece], [(2, half)], removeObject=False, removeTool=False)
+                    made = [s for s in inside + outside if s[0] == 2]
+                    if not made:  # a piece wholly on one side: OCC's booleans return nothing then
+                        made = [piece]
+                    elif piece not in made:
+                        occ.remove([piece], recursive=True)
+                    nxt += made
                 occ.remove([(2, half)], recursive=True)
                 pieces = nxt
             surfaces += pieces
