@@ -349,13 +349,19 @@ X_WORDS = "horizontal distance from the symmetry axis x [m]"
 
 
 def full_model_axes(fig, case) -> None:
-    """A full model (a section with openings, `model: full`) has no symmetry axis: its x axes say x."""
+    """A full model (a section with openings, `model: full`) has no symmetry axis: its x axes say x, and
+    horizontal movements are along +x."""
     from geoback.reports.section import half_model
 
     if case is not None and not half_model(case):
         for ax in fig.axes:
             if ax.get_xlabel() == X_WORDS:
                 ax.set_xlabel("x, horizontal position [m]")
+            for get, put in ((ax.get_xlabel, ax.set_xlabel), (ax.get_ylabel, ax.set_ylabel)):
+                text = get()
+                if "away from the axis" in text or "towards the axis" in text:  # u_x: along +x there
+                    put(text.replace("+ away from the axis", "+ towards +x").replace("+ towards the axis",
+                                                                                      "+ towards -x"))
 
 
 def predicted_figure(blocks, computed: np.ndarray, profiles: dict | None = None, name: str = "",
