@@ -81,7 +81,7 @@ def frames(case) -> tuple:
     lo_x, lo_y = bounds[:, 0].min(), bounds[:, 1].min()
     hi_x, hi_y = bounds[:, 2].max(), bounds[:, 3].max()
     largest = max(max(b[2] - b[0], b[3] - b[1]) for b in bounds)
-    reach = 1.6 * max(largest, 2 * size(case))  # the openings with their near field (not the whole group's span)
+    reach = 0.8 * max(largest, 2 * size(case))  # each opening with its near field (as 2.6 R around a circle)
     zx0 = max(x0, lo_x - reach) if g.model == "full" else -0.04 * (hi_x + reach)
     zx = (zx0, min(x1, hi_x + reach))
     ztop = 0.0 if hi_y + 2 * reach > 0 else hi_y + reach  # keep a shallow cover whole
@@ -156,9 +156,9 @@ def installed_at(case) -> dict[str, str]:
 
 
 # ---------------------------------------------------------------------------- drawing
-def draw_section(ax, case, k: int | None = None, label: bool = True, colour: str = OPENING) -> None:
-    """The openings' outlines (solid), their parts' cut lines (dotted) and, for a circular tunnel, its
-    wall; the linings standing after stage k are left to the caller (they are elements)."""
+def draw_section(ax, case, label: bool = True, colour: str = OPENING) -> None:
+    """The openings' outlines (dashed), their parts' cut lines (dotted) and, for a circular tunnel, its
+    wall (dashed); the linings are left to the caller (they are elements, standing or not by stage)."""
     g = case.geometry
     if not has_openings(case):
         theta = np.linspace(-np.pi / 2, np.pi / 2, 200)
@@ -171,8 +171,10 @@ def draw_section(ax, case, k: int | None = None, label: bool = True, colour: str
     for i, op in enumerate(g.openings):
         pts = lay.sample(lay.outline(op))
         pts = np.vstack([pts, pts[:1]])
-        if g.model == "half":
-            pts = pts[pts[:, 0] >= -1e-9]
+        if g.model == "half":  # the modelled side only, broken where the outline leaves it
+            kept = np.flatnonzero(pts[:, 0] >= -1e-9)
+            gaps = np.flatnonzero(np.diff(kept) > 1) + 1
+            pts = np.insert(pts[kept], gaps, np.nan, axis=0)
         ax.plot(pts[:, 0], pts[:, 1], color=colour, lw=1.3, ls="--",
                 label="openings' walls before excavation" if label and i == 0 else None)
         poly = lay.polygon(op)
@@ -198,24 +200,3 @@ def _clip(a, b, poly, ground):
     pieces = getattr(line, "geoms", [line])
     pts = np.vstack([np.array(piece.coords) for piece in pieces])
     return pts[[int(np.argmin(pts @ d)), int(np.argmax(pts @ d))]]
-
-
-def part_names_at(case, k: int | None = None) -> tuple[list[str], list[str]]:
-    """(excavated, not yet excavated) parts or openings after stage k (default the last)."""
-    from geoback.case.sequence import Sequence
-
-    plan = Sequence.of(case)
-    k = len(plan.steps) - 1 if k is None else k
-    done = [r for s in plan.steps[:k + 1] for r in s.excavate]
-    everything = [r for s in plan.steps for r in s.excavate]
-    return done, [r for r in everything if r not in done]
-
-
-def stage_words(case, k: int | None = None) -> str:
-    """'after stage 'bench' (3 of 4: heading, heading-lined, bench, ring-closed)', or '' for a case of one
-    stage without a construction section."""
-    names = stage_names(case)
-    k = len(names) - 1 if k is None else k
-    if len(names) == 1:
-        return f"after stage '{names[0]}'" if case.construction is not None else ""
-    return f"after stage '{names[k]}' ({k + 1} of {len(names)}: {', '.join(names)})"
