@@ -59,6 +59,8 @@ def clean_loc(loc: tuple, data: Any) -> tuple:
             continue  # a validator's tag such as 'function-after[...]'
         if part in ("in-order", "by-stage") and out and out[-1] == "readings":
             continue  # the two shapes of readings (case_schema.Readings)
+        if part in ("circular", "layout") and out == ["geometry"]:
+            continue  # the two geometries (a circular tunnel's, a section with openings)
         out.append(part)
     return tuple(out)
 
