@@ -63,6 +63,28 @@ def test_forecast_and_design(monkeypatch, capsys):
     assert "best next instrument" in out
 
 
+def test_openings(monkeypatch, capsys):
+    """The horseshoe dug as heading and bench (truth E = 60 MPa, K0 = 0.8, beta = 0.35) and the twin tunnels
+    (truth E = 45 MPa, K0 = 0.65), readings from a mesh twice as fine: each fit converges, every truth
+    lies inside its 95 % interval, the readings are consistent with their stated sigma (chi-square
+    p > 0.05), and the stds are those the README quotes."""
+    ex, out = run_example("openings", monkeypatch, capsys)
+    for name, truth in ex["TRUTH"].items():
+        result = ex["results"][name]
+        assert result.fit.status == "converged", name
+        for p, true in truth.items():
+            r = result[p]
+            assert r.low < true < r.high, (name, p, r.low, true, r.high)
+        pp = result.reliability
+        assert pp.p_value > 0.05, name
+    natm, twin = ex["results"]["natm-heading-bench"], ex["results"]["twin-tunnels"]
+    assert natm["E[clay]"].value == pytest.approx(59_000.0, rel=0.01)  # 1.3 std below the truth (noise)
+    assert natm["E[clay]"].std == pytest.approx(800.0, rel=0.1) and natm["K0"].std == pytest.approx(0.0039, rel=0.1)
+    assert natm["beta[heading]"].std == pytest.approx(0.0079, rel=0.1)
+    assert twin["E[clay]"].std == pytest.approx(1140.0, rel=0.1) and twin["K0"].std == pytest.approx(0.028, rel=0.1)
+    assert "stages heading, heading-lined, bench, ring-closed" in out and "OUTSIDE" not in out
+
+
 def test_every_example_is_tested():
     tested = {name.removeprefix("test_") for name in globals() if name.startswith("test_")}
     assert {p.stem for p in EXAMPLES} <= tested

@@ -320,6 +320,10 @@ def _section_problems(case: Case, allow_large: bool) -> list[tuple[tuple, str]]:
         if bad:
             problems.append((("instruments", i, bad[0]), bad[1]))
     problems.extend(_rest_problems(case, construction=False))
+    if not problems:  # the size of the section's mesh, estimated from its size field before gmsh runs
+        big = mesh_size_problem(case, allow_large)
+        if big:
+            problems.append(big)
     return problems
 
 

@@ -321,6 +321,8 @@ def _size_field(inputs: dict, pts: np.ndarray | None):
 def _integrate(inputs: dict) -> tuple[dict[str, float], float]:
     """Triangles by ruling size setting, and the number of boundary edges."""
     g = inputs["geometry"]
+    if "openings" in g:
+        return _integrate_section(inputs)
     W, H, R, a = float(g["width"]), float(g["depth"]), float(g["radius"]), float(g["axis_depth"])
     pts = np.asarray(inputs.get("instrument_points") or [], float).reshape(-1, 2)
     h = _size_field(inputs, pts)
@@ -422,8 +424,11 @@ MESH_FORMAT = 5  # bump when the meshing procedure or the cache layout changes, 
 
 
 def mesh_inputs(case: Case) -> dict:
-    """Everything the mesh depends on (and nothing else)."""
+    """Everything the mesh depends on (and nothing else); with openings, what the estimate of the
+    section's mesh needs (``physics/section_mesh.py`` keys its own cache)."""
     g, m = case.geometry, case.mesh
+    if hasattr(g, "openings"):
+        return _section_inputs(case)
     return {
         "format": MESH_FORMAT,
         "geometry": g.model_dump(),
@@ -466,3 +471,205 @@ def refined_case(case, factor: float):
         "size_instruments": (sizes["size_instruments"] / factor) if sizes["size_instruments"] else None,
     })
     return case.model_copy(update={"mesh": mesh})
+
+
+# ---------------------------------------------------------------------------- sections with openings
+def section_sizes(case: Case) -> tuple[float, float]:
+    """Element size at the openings' walls and far away for a case with openings: the case's
+    ``size_tunnel`` and ``size_far``, by default the smallest opening's equivalent radius / 8 and the
+    model's larger side / 12 (as ``physics/section_mesh.default_sizes`` meshes it)."""
+    from geoback.case.layout import polygon
+
+    g, m = case.geometry, case.mesh
+    radii = [math.sqrt(polygon(op).area / math.pi) for op in g.openings]
+    return (m.size_tunnel or min(radii) / 8, m.size_far or max(g.width, g.depth) / 12)
+
+
+FINE_GROWTH = 3.0  # gmsh grades away from edges shorter than the size field asks at about this rate (fitted:
+# tests/test_section_size.py, the estimate within 8 % of gmsh over horseshoes, circles and polygons, lined or not)
+
+
+def _section_inputs(case: Case) -> dict:
+    g, m = case.geometry, case.mesh
+    wall, far = section_sizes(case)
+    linings = (case.construction.linings or []) if case.construction is not None else []
+    return {
+        "format": MESH_FORMAT,
+        "geometry": g.model_dump(mode="json"),
+        "tops": [layer.top for layer in case.ground.layers],
+        "names": [layer.name for layer in case.ground.layers],
+        "linings": [ln.model_dump(mode="json") for ln in linings],
+        "size_tunnel": wall,
+        "size_far": far,
+        "size_instruments": m.size_instruments,
+        "instrument_points": instrument_refinement_points(case) if m.size_instruments else [],
+        "order": m.order,
+        "growth": m.growth,
+    }
+
+
+def _section_curves(layout, linings: list) -> tuple[list, list, list]:
+    """The curves the section mesh refines towards (every opening's wall, its cut lines within it, in a
+    half-model the symmetry axis across it, the linings' bands' edges), as shapely geometries; the
+    linings' bands (polygon, thickness); and the curves meshed finer than the wall's size (the inner
+    face of a band inside a wall that is not a circle is the sampled inset outline: its sides are
+    ``layout.SAMPLES`` per turn), each with its edge length."""
+    from shapely.geometry import LineString
+
+    from geoback.case import layout as lay
+    from geoback.case.schema import PlacedLining
+
+    x0, x1, depth = lay.box(layout)
+    ground = lay.ground_polygon(layout)
+    curves, bands, fine = [], [], []
+    for op in layout.openings:
+        poly = lay.polygon(op)
+        curves.append(poly.exterior.intersection(ground))
+        for a, b in op.cuts:
+            curves.append(_cut_within(a, b, poly))
+        if layout.model == "half":
+            curves.append(LineString([(0.0, 1.0), (0.0, -depth - 1.0)]).intersection(poly))
+    for data in linings:
+        try:
+            lining = PlacedLining.model_validate(data)
+            band = lay.lining_band(layout, lining).intersection(ground)
+        except Exception:  # noqa: BLE001 - a band the checks refuse: no refinement counted for it
+            continue
+        if band.area <= 0:
+            continue
+        bands.append((band, lining.thickness))
+        curves.append(band.boundary)
+        op = lay.opening_of(layout, lining.on) or lay.opening_of(layout, lay.regions(layout)[lining.on][0])
+        if lining.side == "wall" and op.shape != "circle":
+            # the band's inner face is meshed as the sampled inset outline: its short sides are edges
+            inner = lay.polygon(op, inset=lining.thickness).exterior
+            segment = inner.length / max(len(inner.coords) - 1, 1)
+            fine.append((inner.intersection(band.buffer(1e-6 * lining.thickness)), segment))
+    return [c for c in curves if not c.is_empty], bands, [(c, s) for c, s in fine if not c.is_empty]
+
+
+def _cut_within(a, b, poly):
+    """The part of the straight cut line through a and b that lies in the opening."""
+    from shapely.geometry import LineString
+
+    size = math.hypot(poly.bounds[2] - poly.bounds[0], poly.bounds[3] - poly.bounds[1])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    n = math.hypot(dx, dy) or 1.0
+    reach = 2 * size + math.hypot(a[0] - poly.centroid.x, a[1] - poly.centroid.y)
+    line = LineString([(a[0] - reach * dx / n, a[1] - reach * dy / n), (b[0] + reach * dx / n, b[1] + reach * dy / n)])
+    return line.intersection(poly)
+
+
+def _samples(geoms, spacing: float) -> np.ndarray:
+    """Points along line geometries at most `spacing` apart."""
+    import shapely
+
+    out = []
+    for geom in geoms:
+        for line in getattr(geom, "geoms", [geom]):
+            if line.geom_type == "Polygon":
+                line = line.exterior
+            if line.length <= 0 or not hasattr(line, "interpolate"):
+                continue
+            n = max(2, int(math.ceil(line.length / spacing)) + 1)
+            pts = shapely.line_interpolate_point(line, np.linspace(0.0, line.length, n))
+            out.append(shapely.get_coordinates(pts))
+    return np.vstack(out) if out else np.zeros((0, 2))
+
+
+def _integrate_section(inputs: dict) -> tuple[dict[str, float], float]:
+    """Triangles by ruling size setting, and the boundary edges, of a section with openings: the size
+    field of ``physics/section_mesh.py`` (distance to the walls, cut lines and bands, graded by `growth`
+    up to `size_far`; a band of thickness t meshed at min(size_tunnel, t/2)) integrated over the whole
+    model (the openings are meshed too), as ``_integrate`` does around a circular tunnel."""
+    from scipy.spatial import cKDTree
+    from shapely import contains_xy
+
+    from geoback.case import layout as lay
+    from geoback.case.schema import Layout
+
+    layout = Layout.model_validate(inputs["geometry"])
+    x0, x1, depth = lay.box(layout)
+    W, H = x1 - x0, depth
+    t, far = float(inputs["size_tunnel"]), float(inputs["size_far"])
+    growth = math.log1p(float(inputs["growth"]))
+    curves, bands, fine = _section_curves(layout, inputs.get("linings") or [])
+    spacing = min(t, far) / 4
+    if sum(c.length for c in curves) / spacing > 4 * _MAX_CELLS:  # walls of millions of elements: beyond any limit
+        return {"size_far": 0.0, "size_tunnel": math.inf, "size_instruments": 0.0}, math.inf
+    wall_pts = _samples(curves, spacing)
+    tree = cKDTree(wall_pts) if len(wall_pts) else None
+    sized = [(band, min(t, thickness / 2)) for band, thickness in bands]  # a band meshed at min(wall, t/2)
+    fine = fine + [(band.boundary, tb) for band, tb in sized]  # gmsh grades away from a band's short edges
+    fine_trees = [(cKDTree(p), s) for c, s in fine if s < t and len(p := _samples([c], s))]
+    pts = np.asarray(inputs.get("instrument_points") or [], float).reshape(-1, 2)
+    si = inputs.get("size_instruments")
+    itree = cKDTree(pts) if (si and len(pts) and far > si) else None
+
+    def h(x: np.ndarray, y: np.ndarray, slack: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if tree is not None:
+            d, _ = tree.query(np.column_stack([x, y]))
+            d = np.maximum(d - spacing / 2 - slack, 0.0)
+        else:
+            d = np.full_like(x, np.inf)
+        ht = np.minimum(t + growth * d, far) if far > t else np.full_like(x, far)
+        for ftree, s in fine_trees:
+            df, _ = ftree.query(np.column_stack([x, y]))
+            ht = np.minimum(ht, s + FINE_GROWTH * np.maximum(df - s / 2 - slack, 0.0))
+        for band, tb in sized:
+            ht = np.where(contains_xy(band, x, y), np.minimum(ht, tb), ht)
+        which = np.where(ht < far, 1, 0)
+        size = ht
+        if itree is not None:
+            di, _ = itree.query(np.column_stack([x, y]))
+            di = np.maximum(di - slack, 0.0)
+            hi = np.clip(si + growth * (di - si), si, far)
+            which = np.where(hi < size, 2, which)
+            size = np.minimum(size, hi)
+        return size, which
+
+    side = min(W, H) / 4
+    nx, ny = max(1, math.ceil(W / side)), max(1, math.ceil(H / side))
+    if nx * ny > _MAX_CELLS:
+        raise ValueError("degenerate domain")
+    ix, iy = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    hx, hy = W / nx / 2, H / ny / 2
+    cx, cy = x0 + (2 * ix.ravel() + 1) * hx, -(2 * iy.ravel() + 1) * hy
+    totals = np.zeros(3)
+    for level in range(60):
+        half_diag = math.hypot(hx, hy)
+        size, which = h(cx, cy, np.zeros_like(cx))
+        split = 2 * max(hx, hy) > size
+        last = level == 59 or 4 * int(split.sum()) > _MAX_CELLS
+        done = ~split if not last else np.ones_like(split)
+        hc = size[done]
+        if last:
+            lo, _ = h(cx[done], cy[done], np.full(int(done.sum()), half_diag))
+            hc = np.where(split[done], np.sqrt(lo * hc), hc)
+        np.add.at(totals, which[done], 4 * hx * hy / hc ** 2)
+        if last:
+            break
+        cx, cy = cx[split], cy[split]
+        hx, hy = hx / 2, hy / 2
+        cx = np.concatenate([cx - hx, cx + hx, cx - hx, cx + hx])
+        cy = np.concatenate([cy - hy, cy - hy, cy + hy, cy + hy])
+        if len(cx) == 0:
+            break
+    totals *= AREA_FACTOR
+
+    def along(geoms) -> float:
+        p = _samples(geoms, spacing)
+        if len(p) < 2:
+            return 0.0
+        size, _ = h(p[:, 0], p[:, 1], np.zeros(len(p)))
+        return float(sum(g.length for g in geoms)) * float(np.mean(1.0 / size))
+
+    from shapely.geometry import LineString
+
+    outer = [LineString([(x0, 0.0), (x1, 0.0)]), LineString([(x1, 0.0), (x1, -H)]), LineString([(x1, -H), (x0, -H)]),
+             LineString([(x0, -H), (x0, 0.0)])]
+    boundary = sum(along([line]) for line in outer)
+    interfaces = sum(along([LineString([(x0, -top), (x1, -top)])]) for top in inputs.get("tops", [])[1:])
+    interfaces += sum(along([c]) for c in curves)
+    totals[1] += BOUNDARY_FACTOR * boundary + INTERFACE_FACTOR * interfaces
+    return dict(zip(FIELDS, map(float, totals))), boundary

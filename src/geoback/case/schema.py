@@ -375,7 +375,7 @@ class Inclinometer(_Linewise):
     """Vertical borehole at x; slopes integrated from the reference end (eqns 15-17)."""
 
     kind: Literal["inclinometer"]
-    x: NonNegativeLength = Field(description="horizontal position of the borehole [m]")
+    x: Length = Field(description="horizontal position of the borehole [m] (x < 0: a full model's other side)")
     toe_depth: PositiveLength = Field(description="depth of the borehole's toe [m]")
     head_depth: NonNegativeLength = Field(0.0, description="depth of the borehole's head [m]")
     reference: Literal["toe", "head"] = Field("toe", description="end the readings are integrated from")

@@ -206,7 +206,12 @@ def mesh(case: Path = typer.Argument(..., help="case file (YAML)"),
 
     loaded = _load(case, allow_large)
     folder = _out_dir(loaded, out)
-    m = build_mesh(loaded.case, allow_large=allow_large)
+    if hasattr(loaded.case.geometry, "openings"):  # a section with openings: meshed inside them too
+        from geoback.physics.section_mesh import build_section_mesh
+
+        m = build_section_mesh(loaded.case)
+    else:
+        m = build_mesh(loaded.case, allow_large=allow_large)
     with result_set(folder, "mesh") as staging:
         write_mesh(m, staging / "mesh.msh")
         write_mesh(m, staging / "mesh.vtu")

@@ -59,7 +59,7 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
             **({"plastic_zone": zone.as_dict()} if zone is not None else {}),
         })
         if vtu:
-            write_field(sim.field(values), staging / "field.vtu")
+            write_field(sim.field(values), staging / "field.vtu", analysis.case)
         if forces is not None:  # thrust and moments around the lining: CSV, VTU, figure
             from geoback.reports.fields import write_lining
             from geoback.reports.plots import save_figures
@@ -77,10 +77,11 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
             from geoback.inference.explore import profiles
             from geoback.reports.plots import save_figures
             from geoback.reports.plots.common import RC
-            from geoback.reports.plots.instruments import predicted_figure
+            from geoback.reports.plots.instruments import full_model_axes, predicted_figure
 
             with matplotlib.rc_context(RC):
                 fig = predicted_figure(sim.survey.blocks, x, profiles(sim, values), analysis.case.name, values_text)
+                full_model_axes(fig, analysis.case)
             try:
                 save_figures({"predicted": fig}, staging)
             finally:
@@ -101,11 +102,10 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
 
 def without_readings(path: Path) -> LoadedCase:
     """A case file loaded without its instruments' readings (a readings generator's starting point)."""
-    import yaml
-
     from geoback.case.loading import case_from_data
+    from geoback.case.yamlmarks import load_yaml_with_marks
 
-    data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    data, _ = load_yaml_with_marks(path)  # as case files are read (a lining's `on:` is a key, not true)
     for ins in data.get("instruments", []):
         ins.pop("readings_file", None)
         ins.pop("readings", None)

@@ -103,11 +103,14 @@ def _new_points(a, b, top: int = 3) -> list[dict]:
         sa, sb = a.misfit.simulation, b.misfit.simulation
         case = sa.loaded.case
         g = case.geometry
-        xs = np.linspace(0.0, min(g.width, g.axis_depth + 6 * g.radius), 13)
-        zs = np.linspace(0.0, min(g.depth, g.axis_depth + 8 * g.radius), 15)
-        pts = np.array([(x, -z) for x in xs for z in zs
-                        if np.hypot(x, -z + g.axis_depth) > 1.1 * g.radius and z < 0.97 * g.depth
-                        and x < 0.97 * g.width])
+        if hasattr(g, "openings"):
+            pts = _section_points(case)
+        else:
+            xs = np.linspace(0.0, min(g.width, g.axis_depth + 6 * g.radius), 13)
+            zs = np.linspace(0.0, min(g.depth, g.axis_depth + 8 * g.radius), 15)
+            pts = np.array([(x, -z) for x in xs for z in zs
+                            if np.hypot(x, -z + g.axis_depth) > 1.1 * g.radius and z < 0.97 * g.depth
+                            and x < 0.97 * g.width])
         ua = sa.displacements_at(a.misfit.values(a.refit.p), pts)
         ub = sb.displacements_at(b.misfit.values(b.refit.p), pts)
     except Exception:  # noqa: BLE001 - a suggestion only: never fail the diagnosis for it
@@ -120,6 +123,30 @@ def _new_points(a, b, top: int = 3) -> list[dict]:
                           "difference": float(diff[i, c])})
     found.sort(key=lambda r: -abs(r["difference"]))
     return found[:top]
+
+
+def _section_points(case) -> np.ndarray:
+    """A grid of candidate points around the openings of a section (in the ground, out of every opening
+    by a tenth of its size), as ``_new_points`` searches around a circular tunnel."""
+    from shapely import contains_xy
+
+    from geoback.case.layout import box, polygon
+
+    g = case.geometry
+    x0, x1, depth = box(g)
+    polys = [polygon(op) for op in g.openings]
+    lo = np.min([p.bounds[:2] for p in polys], axis=0)
+    hi = np.max([p.bounds[2:] for p in polys], axis=0)
+    reach = 3 * max(hi - lo)
+    xs = np.linspace(max(x0, lo[0] - reach), min(x1, hi[0] + reach), 13)
+    zs = np.linspace(0.0, min(depth, -lo[1] + reach), 15)
+    X, Z = np.meshgrid(xs, zs, indexing="ij")
+    x, y = X.ravel(), -Z.ravel()
+    keep = (y > -0.97 * depth) & (x > x0 + 0.03 * (x1 - x0) - (0.03 * (x1 - x0) if x0 == 0 else 0.0)) & \
+        (x < x1 - 0.03 * (x1 - x0))
+    for p in polys:
+        keep &= ~contains_xy(p.buffer(0.1 * np.sqrt(p.area / np.pi)), x, y)
+    return np.column_stack([x[keep], y[keep]])
 
 
 def detectable_lambda(k: int, level: float, power: float = POWER) -> float:

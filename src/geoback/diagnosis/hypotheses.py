@@ -108,7 +108,8 @@ def _layer_boundary(ctx: Context) -> list[Hypothesis]:
     """Candidate boundary depths: within the layer, away from its edges, a grid of ~R/2 (a group:
     the depths of one layer are alternatives, refined by ``boundary.py``)."""
     out = []
-    step = max(0.5, ctx.case.geometry.radius / 2)
+    size = tunnel_size(ctx.case)
+    step = max(0.5, size / 2 if not hasattr(ctx.case.geometry, "openings") else round(2 * size) / 4)  # whole 0.5 m
     for name, E, _, top, bottom in _layers(ctx):
         for z in np.arange(top + step, bottom - step / 2, step):
             out.append(Hypothesis(
@@ -122,9 +123,11 @@ def _layer_boundary(ctx: Context) -> list[Hypothesis]:
 def _k0_gradient(ctx: Context) -> list[Hypothesis]:
     if "K0grad" in ctx.baseline:
         return []
-    zc = ctx.case.geometry.axis_depth
+    from geoback.case.layout import reference_depth
+
+    zc = reference_depth(ctx.case)
     return [Hypothesis("K0-gradient", "K0-gradient", "K0 varying with depth",
-                       f"K0 changes linearly with depth (K0 = K0_axis + K0grad * (depth - {zc:g} m)).",
+                       f"K0 changes linearly with depth (K0 = K0_axis + K0grad * (depth - {zc:.3g} m)).",
                        [_param("K0grad", 0.0, -0.5, 0.5)])]
 
 
@@ -148,6 +151,8 @@ def _staged_plan(ctx: Context):
 
 def _release_before_lining(ctx: Context) -> list[Hypothesis]:
     """The release before the lining acts (the convergence-confinement beta), free from its assumed value."""
+    if hasattr(ctx.case.geometry, "openings"):
+        return _section_releases(ctx)
     plan = _staged_plan(ctx)
     name = plan.last_release_before_lining() if plan is not None else None
     if name is None or name in ctx.baseline:
@@ -162,6 +167,8 @@ def _release_before_lining(ctx: Context) -> list[Hypothesis]:
 
 
 def _lining_stiffness(ctx: Context) -> list[Hypothesis]:
+    if hasattr(ctx.case.geometry, "openings"):
+        return _section_linings(ctx)
     plan = _staged_plan(ctx)
     if plan is None or f"E[{plan.lining_name}]" in ctx.baseline:
         return []
@@ -172,6 +179,57 @@ def _lining_stiffness(ctx: Context) -> list[Hypothesis]:
         f"The lining '{plan.lining_name}' is stiffer or softer than its assumed E = {El:.4g} kPa (young or "
         f"cracked shotcrete, joints between segments, another thickness).",
         [_param(E, El, El / 50, El * 50)])]
+
+
+def _section_releases(ctx: Context) -> list[Hypothesis]:
+    """With openings: every stage's release (beta[stage], the part of an excavation's load taken before
+    the support acts) the fit does not identify, free from its assumed value (``case/sequence.py``)."""
+    from geoback.case.sequence import Sequence
+
+    plan = Sequence.of(ctx.case)
+    out = []
+    for k, step in enumerate(plan.steps):
+        name = step.release
+        if name is None or name in ctx.baseline or name not in ctx.values:
+            continue
+        beta = float(ctx.values[name])
+        later = [plan.steps[j] for j in range(k + 1, len(plan.steps)) if plan.steps[j].install]
+        support = f"the linings installed at stage '{later[0].name}'" if later else "the support"
+        out.append(Hypothesis(
+            f"release-before-lining[{step.name}]", "release-before-lining",
+            f"more or less of stage '{step.name}' released before its support than assumed",
+            f"The ground took another fraction of the load of what stage '{step.name}' removed than the assumed "
+            f"{beta:g} before {support} acted ({name}: the face was further or nearer, the support later or earlier).",
+            [_param(name, beta, 0.02, 1.0)]))
+    return out
+
+
+def _section_linings(ctx: Context) -> list[Hypothesis]:
+    """With openings: each lining's modulus E[lining] the fit does not identify, free."""
+    from geoback.case.sequence import Sequence
+
+    out = []
+    for name in Sequence.of(ctx.case).linings:
+        E = f"E[{name}]"
+        if E in ctx.baseline or E not in ctx.values:
+            continue
+        El = float(ctx.values[E])
+        out.append(Hypothesis(
+            f"lining-stiffness[{name}]", "lining-stiffness", f"a stiffer or softer lining '{name}' than assumed",
+            f"The lining '{name}' is stiffer or softer than its assumed E = {El:.4g} kPa (young or cracked shotcrete, "
+            f"joints, another thickness).", [_param(E, El, El / 50, El * 50)]))
+    return out
+
+
+def tunnel_size(case) -> float:
+    """The tunnel's radius, or with openings the smallest opening's equivalent radius (the radius of
+    the circle of the same area): the length candidate depths and screens are spaced by."""
+    g = case.geometry
+    if not hasattr(g, "openings"):
+        return g.radius
+    from geoback.case.layout import polygon
+
+    return min(float(np.sqrt(polygon(op).area / np.pi)) for op in g.openings)
 
 
 def _error_names(ctx: Context) -> set:
@@ -260,6 +318,15 @@ def cause_of(kind: str) -> str:
     return "instrument" if kind in INSTRUMENT_KINDS else "ground"
 
 
+def not_applicable(case) -> list[tuple[str, str]]:
+    """(kind, why) of every row of the catalogue that cannot apply to this case's model, said in the
+    diagnosis instead of tested."""
+    if hasattr(case.geometry, "openings"):
+        return [("yielding", "Mohr-Coulomb ground is modelled for the circular tunnel's geometry only, so far: "
+                             "a section with openings cannot be refitted with yielding ground")]
+    return []
+
+
 def candidate_hypotheses(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
     """Every extension that applies to the misfit's model, with null values taken at its fit p_hat:
     the catalogue's rows in order, each proposing what applies."""
@@ -276,6 +343,8 @@ def depth_offset_range(block, case) -> tuple[float, float]:
     g = case.geometry
     lo, hi = -MAX_DEPTH_OFFSET, MAX_DEPTH_OFFSET
     margin = 1e-3 * g.depth
+    if hasattr(g, "openings"):
+        return _depth_offset_range_section(block, g, lo, hi, margin)
     for x, y in block.points:
         lo = max(lo, y + margin)  # y - zoff <= -margin  (zoff < 0 moves up)
         hi = min(hi, y + g.depth - margin)
@@ -283,6 +352,31 @@ def depth_offset_range(block, case) -> tuple[float, float]:
         if dx < g.radius * 1.05:  # the vertical through the point meets the tunnel: stop short of it
             half = np.sqrt(max((g.radius * 1.05) ** 2 - dx * dx, 0.0))
             top, bottom = -g.axis_depth + half, -g.axis_depth - half
+            if y >= top:
+                hi = min(hi, y - top)
+            elif y <= bottom:
+                lo = max(lo, y - bottom)
+    return float(lo), float(hi)
+
+
+def _depth_offset_range_section(block, g, lo: float, hi: float, margin: float) -> tuple[float, float]:
+    """``depth_offset_range`` with openings: stop short (5 % of its size) of every opening the vertical
+    through a sampling point meets."""
+    from shapely.geometry import LineString
+
+    from geoback.case.layout import polygon
+
+    polys = [polygon(op) for op in g.openings]
+    for x, y in block.points:
+        lo = max(lo, y + margin)
+        hi = min(hi, y + g.depth - margin)
+        for poly in polys:
+            pad = 0.05 * np.sqrt(poly.area / np.pi)
+            cut = LineString([(x, 1.0), (x, -g.depth - 1.0)]).intersection(poly.buffer(pad))
+            if cut.is_empty:
+                continue
+            ys = np.array([c[1] for piece in getattr(cut, "geoms", [cut]) for c in piece.coords])
+            top, bottom = float(ys.max()), float(ys.min())
             if y >= top:
                 hi = min(hi, y - top)
             elif y <= bottom:

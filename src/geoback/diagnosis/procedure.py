@@ -59,7 +59,7 @@ from geoback.physics.simulation import is_instrument_term
 from geoback.diagnosis import yielding
 from geoback.diagnosis.compare import EQUAL_AIC, akaike_weights, detectable_lambda, separation
 from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge
-from geoback.diagnosis.hypotheses import Hypothesis, candidate_hypotheses
+from geoback.diagnosis.hypotheses import Hypothesis, candidate_hypotheses, not_applicable
 from geoback.diagnosis.boundary import boundary_interval, refit_layer_boundary, reprofile_boundary
 from geoback.diagnosis.results import NO_ADDITION, Diagnosis, Mismatch, Round, Scored, settled  # noqa: F401 (Mismatch: re-exported)
 
@@ -384,7 +384,8 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     final = conclude(current, cur_fit, extended.case, extended.digest(), {}, {}, settings=settings)
     intervals = _open_intervals(final, current, settings, [n for s in accepted for n in s.hypothesis.names])
     return Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
-                     time.perf_counter() - t_start, intervals, analysis.loaded, method)
+                     time.perf_counter() - t_start, intervals, analysis.loaded, method,
+                     not_applicable(analysis.case))
 
 
 def scoring_words(hyps: list[Hypothesis]) -> str:

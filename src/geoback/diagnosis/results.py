@@ -126,6 +126,7 @@ class Diagnosis:
     # likelihood intervals of accepted parameters the final identification did not profile (at a bound)
     loaded: object = None  # the LoadedCase diagnosed (for the amended case: its file, its readings files)
     method: str = "lm"  # the estimation method of every fit
+    not_applicable: list = field(default_factory=list)  # (kind, why) of the catalogue's rows this model cannot take
 
     @property
     def baseline_fit(self) -> Fit:

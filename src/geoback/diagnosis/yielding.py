@@ -70,6 +70,8 @@ def screen(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
     """The yielding hypotheses worth a refit at the baseline optimum (see the module docstring)."""
     sim = misfit.simulation
     case = sim.loaded.case
+    if hasattr(case.geometry, "openings"):  # not modelled there (hypotheses.not_applicable says why)
+        return []
     if getattr(sim, "piecewise_smooth", False) or (case.construction is not None and case.construction.lining):
         return []
     values = misfit.values(p_hat)

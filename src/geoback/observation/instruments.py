@@ -280,6 +280,9 @@ def case_blocks(loaded: LoadedCase) -> list[InstrumentBlock]:
     return check_inside(case, blocks, loaded) or blocks
 
 
+_MIRRORED_SAID: set = set()  # (case file, instrument) whose mirroring was said
+
+
 def _check_in_section(g, blocks: list[InstrumentBlock], loaded: LoadedCase) -> list[InstrumentBlock]:
     """Points inside the section's box (what is excavated depends on the stage: the simulation refuses
     readings of excavated ground); in a half-model, points at x < 0 mirrored with a notice."""
@@ -297,8 +300,11 @@ def _check_in_section(g, blocks: list[InstrumentBlock], loaded: LoadedCase) -> l
                                                              f"ground (x between {lo:g} and {hi:g} m, y between "
                                                              f"{-g.depth:g} and 0 m), found {what} {j + 1} at ({x:g}, {y:g})")
         if half and (b.points[:, 0] < -tol).any():
-            print(f"notice: {b.kind} '{b.name}': points at x < 0 are read at their mirror images (a half-model is "
-                  f"symmetric about x = 0: u_x changes sign)", file=sys.stderr, flush=True)
+            said = (str(loaded.path), b.name) if loaded.path is not None else None
+            if said is None or said not in _MIRRORED_SAID:  # once per instrument of a case file (validate and
+                _MIRRORED_SAID.add(said)  # run build it twice)
+                print(f"notice: {b.kind} '{b.name}': points at x < 0 are read at their mirror images (a half-model "
+                      f"is symmetric about x = 0: u_x changes sign)", file=sys.stderr, flush=True)
             b = mirrored(b)
         out.append(b)
     return out

@@ -475,6 +475,6 @@ class ExcavationSimulation(Simulation):
         run = self._run(values, ())
         u = self.fe.expand(run.u[-1])
         stress = self.element_stress(values)
-        point_data = {f"displacement_{s}": self.fe.expand(run.u[k]).reshape(-1, 2) for k, s in enumerate(self.stages)}
+        point_data = {f"displacement[{s}]": self.fe.expand(run.u[k]).reshape(-1, 2) for k, s in enumerate(self.stages)}
         return Field(self.mesh, u.reshape(-1, 2), {"stress_xx": stress[:, 0], "stress_yy": stress[:, 1],
                                                    "stress_xy": stress[:, 2]}, point_data)

@@ -9,7 +9,7 @@ import numpy as np
 from geoback.outputs import write_atomic, write_json
 from geoback.reports.resultsets import result_set
 from geoback.diagnosis.compare import detectable_text, unit_of
-from geoback.diagnosis.hypotheses import CAUSES
+from geoback.diagnosis.hypotheses import CAUSES, KINDS
 from geoback.diagnosis.procedure import NO_ADDITION
 from geoback.units import display, interval_text, pm_text, value_text
 from geoback.diagnosis.amend import AMENDED, amended_text
@@ -172,6 +172,8 @@ def verdict(d) -> str:
 
 def diagnosis_text(d) -> str:
     lines = [f"# geoback diagnosis: {d.case}", "", verdict(d), ""]
+    for kind, why in getattr(d, "not_applicable", []):
+        lines += [f"Not tested: {kind} ({KINDS.get(kind, kind)}): {why}.", ""]
     for k, rnd in enumerate(d.rounds, 1):
         lines += [f"## Round {k}", "", f"- fit: {_fit_line(rnd.chi2, rnd.dof, rnd.p_value)}"] + _scale_lines(rnd)
         if rnd.adequate and rnd.accepted is None:
@@ -360,6 +362,7 @@ def diagnosis_json(d) -> dict:
         "instrument_error": [s.hypothesis.key for s in c["instrument"]],
         "ground_physics": [s.hypothesis.key for s in c["ground"]],
         "rivals": rival_sentences(d),
+        "not_tested": [{"kind": k, "why": why} for k, why in getattr(d, "not_applicable", [])],
         "detectable": detectable_text(d.rounds[-1].ranking, d.rounds[-1].threshold) if not d.accepted else "",
         "seconds": d.seconds,
         "before": {"chi2": b.chi2, "dof": b.dof, "reduced_chi2": b.reduced_chi2, "p_value": b.p_value,

@@ -20,7 +20,10 @@ def write_mesh(mesh: Mesh, path: Path, point_data: dict | None = None, cell_data
     (gmsh 2.2 through meshio, with one physical group per layer and 100 for the tunnel wall)."""
     path = Path(path)
     if path.suffix == ".vtu":
-        cdata = {"region": mesh.region.astype(np.int32), **(cell_data or {})}
+        cdata = {"region": mesh.region.astype(np.int32)}
+        if getattr(mesh, "part", None) is not None:  # a section with openings: its parts and linings' bands
+            cdata.update({"part": mesh.part.astype(np.int32), "band": mesh.band.astype(np.int32)})
+        cdata.update(cell_data or {})
         write_atomic(path, vtu_text(mesh.nodes, mesh.triangles, point_data, cdata))
         return
     import meshio
@@ -28,12 +31,16 @@ def write_mesh(mesh: Mesh, path: Path, point_data: dict | None = None, cell_data
     cell_type = "triangle6" if mesh.order == 2 else "triangle"
     points = np.column_stack([mesh.nodes, np.zeros(len(mesh.nodes))])
     if Path(path).suffix == ".msh":  # gmsh's own tags: one physical group per layer, 100 = tunnel wall
-        tags = [mesh.region.astype(np.int32) + 1, np.full(len(mesh.tunnel_edges), 100, np.int32)]
         edge_type = "line3" if mesh.order == 2 else "line"
-        m = meshio.Mesh(points, [(cell_type, mesh.triangles), (edge_type, mesh.tunnel_edges)],
-                        cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags},
-                        field_data={**{name: np.array([i + 1, 2]) for i, name in enumerate(mesh.region_names)},
-                                    "tunnel": np.array([100, 1])})
+        blocks = [(cell_type, mesh.triangles)]
+        tags = [mesh.region.astype(np.int32) + 1]
+        fields = {name: np.array([i + 1, 2]) for i, name in enumerate(mesh.region_names)}
+        if len(mesh.tunnel_edges):  # (a section with openings has no tunnel wall: its openings are meshed)
+            blocks.append((edge_type, mesh.tunnel_edges))
+            tags.append(np.full(len(mesh.tunnel_edges), 100, np.int32))
+            fields["tunnel"] = np.array([100, 1])
+        m = meshio.Mesh(points, blocks, cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags},
+                        field_data=fields)
     else:
         cdata = {"region": [mesh.region.astype(np.int32)]}
         for k, v in (cell_data or {}).items():

@@ -61,6 +61,8 @@ def _where(fc, i: int) -> str:
     at = float(pos[int(np.flatnonzero(rows == i)[0])])
     if label.startswith("offset"):
         return f"at {at:.3g} m from the tunnel axis"
+    if label.startswith("x,"):
+        return f"at x = {at:.3g} m"
     if label.startswith("distance along"):
         return f"at {at:.3g} m along the line ({fc.x[i]:.3g}, {fc.y[i]:.3g})"
     if label.startswith("angle"):

@@ -226,9 +226,12 @@ def error_scale_lines(rel) -> list[str]:
     return out
 
 
-def write_field(field, path: Path) -> None:
+def write_field(field, path: Path, case=None) -> None:
     """Displacement (point data) and cell data (stresses, ...) as VTU for ParaView; more point data
-    (the displacement after every construction stage) if the field has it."""
+    (the displacement after every construction stage) if the field has it. With `case` (a section
+    with openings), each element's state after every stage as cell data 'state[<stage>]': -1
+    excavated, 0 ground, 1 + i the lining i of the mesh's bands standing there (threshold at >= 0 in
+    ParaView to see the section as it stands after that stage)."""
     from geoback.reports.fields import write_mesh
 
     def vec(v):
@@ -237,7 +240,15 @@ def write_field(field, path: Path) -> None:
 
     point = {"displacement": vec(field.displacement)}
     point.update({k: vec(v) for k, v in getattr(field, "point_data", {}).items()})
-    write_mesh(field.mesh, path, point_data=point, cell_data=field.cell_data)
+    cells = dict(field.cell_data)
+    if case is not None and getattr(field.mesh, "part", None) is not None:
+        from geoback.reports.section import has_openings, stage_names, stage_state
+
+        if has_openings(case):
+            for k, stage in enumerate(stage_names(case)):
+                void, lining = stage_state(case, field.mesh, k)
+                cells[f"state[{stage}]"] = np.where(void, -1, lining + 1).astype(np.int32)
+    write_mesh(field.mesh, path, point_data=point, cell_data=cells)
 
 
 def write_run(res, out: Path, exploration=None, plots: bool = False, readings=()) -> None:
@@ -282,7 +293,7 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
     write_csv(out / "iterations.csv", ["iteration", "mu", "J"] + names + ["accepted"],
               [[h.k, h.mu, h.J] + list(h.p) + [h.accepted] for h in f.history])
     if exploration is not None and exploration.field is not None:
-        write_field(exploration.field, out / "field.vtu")
+        write_field(exploration.field, out / "field.vtu", res.case)
     if exploration is not None and getattr(exploration, "lining", None) is not None:
         from geoback.reports.fields import write_lining
 

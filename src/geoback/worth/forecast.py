@@ -208,8 +208,10 @@ def _specs(loaded, stages: list[str]) -> list[_Spec]:
             s.block = build_block(SimpleNamespace(kind="points", name=f.name, points=pts, components=[f.component],
                                                   sigma=1.0), loaded, i)
             xy, a = np.asarray(pts), np.asarray(f.start, float)
-            if f.start[1] == f.end[1]:  # horizontal: by offset from the tunnel's axis
-                s.position, s.position_label = xy[:, 0], "offset from the tunnel axis [m]"
+            if f.start[1] == f.end[1]:  # horizontal: by offset from the tunnel's axis (a full model: by x)
+                full = getattr(loaded.case.geometry, "model", "half") == "full"
+                s.position, s.position_label = xy[:, 0], "x, horizontal position [m]" if full else \
+                    "offset from the tunnel axis [m]"
             elif f.start[0] == f.end[0]:  # vertical: by depth
                 s.position, s.position_label = -xy[:, 1], "depth [m]"
             else:

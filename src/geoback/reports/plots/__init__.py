@@ -98,6 +98,9 @@ def save_figures(figs: dict, out: Path, formats: tuple[str, ...] = FORMATS, dpi:
             for k, fmt in enumerate(formats):
                 buf = io.BytesIO()
                 meta = {"Date": None} if fmt == "svg" else {"Software": None} if fmt == "png" else None
+                title = fig.get_suptitle() if hasattr(fig, "get_suptitle") else ""  # (matplotlib >= 3.8)
+                if fmt == "svg" and title:  # the SVG says what it shows (dc:title)
+                    meta["Title"] = " ".join(title.split())
                 if k == 1:  # laid out by the first format's drawing: the others keep its positions
                     fig.set_layout_engine("none")
                 fig.savefig(buf, format=fmt, dpi=dpi, metadata=meta)

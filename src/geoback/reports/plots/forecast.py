@@ -29,7 +29,7 @@ def layout(fc, rows) -> tuple[np.ndarray, str, bool]:
         return pos, DEPTH, True
     x, y = fc.x[rows], fc.y[rows]
     if len(rows) > 1 and not label.startswith("angle") and np.ptp(y) <= 1e-9 * max(np.ptp(x), 1e-12) < np.ptp(x):
-        return x, label if label.startswith("offset") else "horizontal distance from the symmetry axis x [m]", False
+        return x, label if label.startswith(("offset", "x,")) else "horizontal distance from the symmetry axis x [m]", False
     return pos, label, False
 
 

@@ -87,7 +87,7 @@ def points_layout(block) -> tuple[bool, np.ndarray, str]:
     vertical = np.ptp(pts[:, 0]) < 1e-9 * max(np.ptp(pts[:, 1]), 1.0) and np.ptp(pts[:, 1]) > 0
     if vertical:
         return True, np.array([-lab.y for lab in block.labels]), "depth below the surface [m]"
-    return False, np.array([lab.x for lab in block.labels]), "horizontal distance from the symmetry axis x [m]"
+    return False, np.array([lab.x for lab in block.labels]), X_WORDS
 
 
 def _residual_texts(ax, coord, r_, k, colour_of, side_column: bool) -> None:
@@ -145,7 +145,7 @@ def _linewise(ax, block, group, data, prof, staged, stages, before) -> bool:
         ax.set_ylabel("depth below the surface [m]")
         ax.set_xlabel(f"{what} [mm]")
     else:
-        ax.set_xlabel("horizontal distance from the symmetry axis x [m]")
+        ax.set_xlabel(X_WORDS)
         ax.set_ylabel(f"{what} [mm]")
         if data.measured is not None:
             lo_, hi_ = ax.get_ylim()
@@ -337,11 +337,31 @@ def instruments_figure(res, exploration=None, before: np.ndarray | None = None, 
         handles.append(Line2D([], [], ls="--", marker="s", ms=3.5, lw=1.2, color=BEFORE, label=before_label))
     _draw(fig, data, exploration.profiles if exploration is not None else {}, before, list(boundaries), handles,
           2 if staged else 3)
+    full_model_axes(fig, res.case)
     fig.suptitle(title or f"Measured and computed readings at the estimate (fit: {res.weighting} "
                           f"weighting; σ and whitened residuals r′ from the case's C_x)"
                           + (f"\nreadings accumulated up to each construction stage: {', '.join(stages)}"
                              if staged else ""), fontsize=10.5)
     return fig
+
+
+X_WORDS = "horizontal distance from the symmetry axis x [m]"
+
+
+def full_model_axes(fig, case) -> None:
+    """A full model (a section with openings, `model: full`) has no symmetry axis: its x axes say x, and
+    horizontal movements are along +x."""
+    from geoback.reports.section import half_model
+
+    if case is not None and not half_model(case):
+        for ax in fig.axes:
+            if ax.get_xlabel() == X_WORDS:
+                ax.set_xlabel("x, horizontal position [m]")
+            for get, put in ((ax.get_xlabel, ax.set_xlabel), (ax.get_ylabel, ax.set_ylabel)):
+                text = get()
+                if "away from the axis" in text or "towards the axis" in text:  # u_x: along +x there
+                    put(text.replace("+ away from the axis", "+ towards +x").replace("+ towards the axis",
+                                                                                      "+ towards -x"))
 
 
 def predicted_figure(blocks, computed: np.ndarray, profiles: dict | None = None, name: str = "",
