@@ -102,7 +102,7 @@ def test_simulate_covariance_diagnose_and_design(tmp_path):
     diag = cli("diagnose", NATM, "--out", tmp_path / "diag", "--json")
     assert diag.returncode == 0, diag.stderr
     result = json.loads(diag.stdout)
-    assert result["adequate_before"] and [n["kind"] for n in result["not_tested"]] == ["yielding"]
+    assert result["adequate_before"] and result["not_tested"] == []  # yielding too is tested with openings
     design = cli("design", NATM, "--out", tmp_path / "design")
     assert design.returncode == 0, design.stderr
     assert (tmp_path / "design" / "design.csv").exists()

@@ -321,9 +321,10 @@ def cause_of(kind: str) -> str:
 def not_applicable(case) -> list[tuple[str, str]]:
     """(kind, why) of every row of the catalogue that cannot apply to this case's model, said in the
     diagnosis instead of tested."""
-    if hasattr(case.geometry, "openings"):
-        return [("yielding", "Mohr-Coulomb ground is modelled for the circular tunnel's geometry only, so far: "
-                             "a section with openings cannot be refitted with yielding ground")]
+    c = case.construction
+    if not hasattr(case.geometry, "openings") and c is not None and c.lining is not None:
+        return [("yielding", "a lining on yielding ground is modelled for sections with openings only: the "
+                             "circular tunnel's lined case is not refitted with yielding ground")]
     return []
 
 

@@ -29,8 +29,10 @@ so it cannot rank the hypothesis. Yielding is therefore tested as a likelihood r
    conservative.
 
 A refit runs only when the baseline is not adequate (procedure.py): readings that an elastic model
-explains are never called yielding. Not proposed when the simulation already yields, or for a case
-with a lining (a lining on yielding ground is not modelled).
+explains are never called yielding. Not proposed when the simulation already yields, or for a circular
+tunnel's case with a lining (a lining on yielding ground is not modelled there). With openings the
+screen takes the ground within (SCREEN_RADIUS - 1) equivalent radii of a wall, after every stage,
+and the refit is the factory's yielding simulation of the section (``physics/excavation_plastic.py``).
 """
 from __future__ import annotations
 
@@ -70,19 +72,22 @@ def screen(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
     """The yielding hypotheses worth a refit at the baseline optimum (see the module docstring)."""
     sim = misfit.simulation
     case = sim.loaded.case
-    if hasattr(case.geometry, "openings"):  # not modelled there (hypotheses.not_applicable says why)
-        return []
-    if getattr(sim, "piecewise_smooth", False) or (case.construction is not None and case.construction.lining):
+    openings = hasattr(case.geometry, "openings")  # (linings there are bands, modelled on yielding ground)
+    if getattr(sim, "piecewise_smooth", False) or (not openings and case.construction is not None
+                                                   and case.construction.lining):
         return []
     values = misfit.values(p_hat)
     if any(n.startswith("zoff[") for n in misfit.parameters.names) or sim.survey.offsets(values):
         return []  # the elastoplastic simulation does not read inclinometers at depth offsets
-    fld = sim.field(values)
-    mesh, cell = fld.mesh, fld.cell_data
-    g = case.geometry
-    centroid = mesh.nodes[mesh.triangles[:, :3]].mean(axis=1)
-    near = np.hypot(centroid[:, 0], centroid[:, 1] + g.axis_depth) < SCREEN_RADIUS * g.radius
-    c_req = required_cohesion(cell["stress_xx"], cell["stress_yy"], cell["stress_xy"])
+    if openings:
+        mesh, near, c_req = _section_screen(sim, values)
+    else:
+        fld = sim.field(values)
+        mesh, cell = fld.mesh, fld.cell_data
+        g = case.geometry
+        centroid = mesh.nodes[mesh.triangles[:, :3]].mean(axis=1)
+        near = np.hypot(centroid[:, 0], centroid[:, 1] + g.axis_depth) < SCREEN_RADIUS * g.radius
+        c_req = required_cohesion(cell["stress_xx"], cell["stress_yy"], cell["stress_xy"])
     out = []
     for i, layer in enumerate(case.ground.layers):
         sel = near & (mesh.region == i)
@@ -110,6 +115,31 @@ def screen(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
     return out
 
 
+def _section_screen(sim, values) -> tuple:
+    """With openings: (mesh, near, c_req) over the ground of the section, `near` the elements within
+    (SCREEN_RADIUS - 1) equivalent radii of an opening's wall (as within SCREEN_RADIUS R of a circular
+    tunnel's axis) that are ground when read, c_req the largest cohesion their stress asks for over
+    the stages (a heading released before its support may yield before the lining acts)."""
+    from shapely import distance, points
+
+    from geoback.case.layout import polygon
+
+    case, mesh = sim.loaded.case, sim.mesh
+    centroid = mesh.nodes[mesh.triangles[:, :3]].mean(axis=1)
+    pts = points(centroid[:, 0], centroid[:, 1])
+    near = np.zeros(len(centroid), bool)
+    for op in case.geometry.openings:
+        poly = polygon(op)
+        near |= distance(poly, pts) < (SCREEN_RADIUS - 1) * math.sqrt(poly.area / math.pi)
+    ground = getattr(mesh, "band", np.full(len(centroid), -1)) < 0  # linings are not the ground that yields
+    c_req = np.full(len(centroid), -np.inf)
+    for k in range(len(sim.stages)):
+        stress = sim.element_stress(values, k)  # NaN where the stage has removed the element
+        c_k = required_cohesion(stress[:, 0], stress[:, 1], stress[:, 2])
+        c_req = np.fmax(c_req, np.where(np.isfinite(c_k), c_k, -np.inf))
+    return mesh, near & ground & np.isfinite(c_req), c_req
+
+
 def refit(h: Hypothesis, current, cur_fit, settings, method: str, say):
     """The baseline with the hypothesis' layer made mohr-coulomb, fitted; a procedure.Scored with its
     likelihood-ratio test (score and its p-value are NaN: there is none), or None if the yielding
@@ -129,8 +159,14 @@ def refit(h: Hypothesis, current, cur_fit, settings, method: str, say):
         say(f"refitting with {h.title} (c' from {c0:.3g} kPa, phi' = {PHI:g} deg)")
         s = Scored(h, float("nan"), len(h.parameters), float("nan"))
         try:
-            plastic = PlasticSimulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
-                                        backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
+            if hasattr(case.geometry, "openings"):  # yielding ground with openings (the factory's row for it)
+                from geoback.physics.factory import make_simulation
+
+                plastic = make_simulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
+                                          backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
+            else:
+                plastic = PlasticSimulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
+                                            backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
             s.misfit = current.extended([spec.model_copy(update={"initial": c0})], simulation=plastic,
                                         start=cur_fit.p)
             s.refit, s.reliability = fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
