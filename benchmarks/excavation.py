@@ -19,7 +19,7 @@ is factorised once for the whole identification; wall and CPU seconds, peak memo
 Floors (issue 19): factorisations of a forward run = distinct configurations; least_squares / geoback
 >= 10x; the large identification < 60 s wall.
 
-    python benchmarks/excavation.py [--scale 2.2] [--large] [--csv out.csv]
+    python benchmarks/excavation.py [--scale 4.5] [--large] [--csv out.csv]
 """
 from __future__ import annotations
 
@@ -168,7 +168,7 @@ def run_scipy(data) -> dict:
 
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scale", type=float, default=2.2, help="divide the section's element sizes by this")
+    ap.add_argument("--scale", type=float, default=4.5, help="divide the section's element sizes by this")
     ap.add_argument("--large", action="store_true", help="also the ~500 k DOF heading-and-bench identification")
     ap.add_argument("--large-scale", type=float, default=7.0)
     ap.add_argument("--skip-scipy", action="store_true")
