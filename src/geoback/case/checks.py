@@ -305,20 +305,7 @@ def _section_problems(case: Case, allow_large: bool) -> list[tuple[tuple, str]]:
     if problems:
         return problems
     problems.extend(sequence_problems(case))
-    inames = [ins.name for ins in case.instruments]
-    for i, n in enumerate(inames):
-        if inames.index(n) != i:
-            problems.append((("instruments", i, "name"),
-                             f"expected unique instrument names, found '{n}' again (as in instruments[{inames.index(n)}])"))
-    for i, ins in enumerate(case.instruments):
-        problems.extend(_instrument_problems(g, i, ins))
-        if ins.kind in ("inclinometer", "sliding_micrometer", "extensometer", "deflectometer"):
-            n, field = _station_count(ins)
-            if n > MAX_STATIONS:
-                problems.append((("instruments", i, field), f"expected at most {MAX_STATIONS} stations, found {n}"))
-        bad = _covariance_problem(ins)
-        if bad:
-            problems.append((("instruments", i, bad[0]), bad[1]))
+    problems.extend(_instrument_list_problems(case))
     problems.extend(_rest_problems(case, construction=False))
     if not problems:  # the size of the section's mesh, estimated from its size field before gmsh runs
         big = mesh_size_problem(case, allow_large)
@@ -327,7 +314,8 @@ def _section_problems(case: Case, allow_large: bool) -> list[tuple[tuple, str]]:
     return problems
 
 
-def _instrument_and_mesh_problems(case: Case, allow_large: bool) -> list[tuple[tuple, str]]:
+def _instrument_list_problems(case: Case) -> list[tuple[tuple, str]]:
+    """Instruments of any geometry: unique names, points in the ground, stations, covariance."""
     g, problems = case.geometry, []
     inames = [ins.name for ins in case.instruments]
     for i, n in enumerate(inames):
@@ -352,6 +340,12 @@ def _instrument_and_mesh_problems(case: Case, allow_large: bool) -> list[tuple[t
         bad = _covariance_problem(ins)
         if bad:
             problems.append((("instruments", i, bad[0]), bad[1]))
+    return problems
+
+
+def _instrument_and_mesh_problems(case: Case, allow_large: bool) -> list[tuple[tuple, str]]:
+    g = case.geometry
+    problems = _instrument_list_problems(case)
     for field in ("size_tunnel", "size_far", "size_instruments"):
         size = getattr(case.mesh, field)
         if size is not None and size < 1e-4 * g.radius:

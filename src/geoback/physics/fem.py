@@ -137,19 +137,7 @@ class FEModel:
     # ------------------------------------------------------------------ assembly
     def _strain_operators(self, sl: slice):
         """exx, eyy, gxy of every local vector shape function at quadrature points, and weights."""
-        coords = self.nodes[self.tri[sl]]
-        inv, det = _geometry(coords, self._dN)
-        dNdx = np.einsum("nrq,eqrx->enxq", self._dN, inv)  # (ne, nb, 2, nq)
-        n, nb, _, nq = dNdx.shape
-        exx = np.zeros((n, 2 * nb, nq))
-        eyy = np.zeros_like(exx)
-        gxy = np.zeros_like(exx)
-        exx[:, 0::2] = dNdx[:, :, 0]
-        eyy[:, 1::2] = dNdx[:, :, 1]
-        gxy[:, 0::2] = dNdx[:, :, 1]
-        gxy[:, 1::2] = dNdx[:, :, 0]
-        w = np.abs(det) * self._W
-        return exx, eyy, gxy, w
+        return self.element_quadrature(np.arange(self.ne)[sl])[:4]
 
     def _nodal_products(self, sl: slice) -> np.ndarray:
         """M_xx, M_yy, M_xy, M_yx per element (n, 4 * nb * nb, flattened), M_xy[a, b] = int N_a,x N_b,y."""
