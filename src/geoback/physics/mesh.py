@@ -212,6 +212,43 @@ def _remove_stale_temporaries(folder: Path) -> None:
             pass
 
 
+def generate(gmsh, background: list[int], order: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mesh with the minimum of the size fields `background` (nothing else sets sizes), quadratic
+    elements straight-sided where the geometry is (no high-order optimisation); returns the map from
+    gmsh's node tags to indices and the nodes' (x, y)."""
+    fields = gmsh.model.mesh.field
+    fields.add("Min", 10)
+    fields.setNumbers(10, "FieldsList", background)
+    fields.setAsBackgroundMesh(10)
+    for opt, val in (("Mesh.MeshSizeExtendFromBoundary", 0), ("Mesh.MeshSizeFromPoints", 0),
+                     ("Mesh.MeshSizeFromCurvature", 0), ("Mesh.Algorithm", 6),
+                     ("Mesh.ElementOrder", order), ("Mesh.SecondOrderLinear", 0),
+                     ("Mesh.HighOrderOptimize", 0)):
+        gmsh.option.setNumber(opt, val)
+    gmsh.model.mesh.generate(2)
+    node_tags, coords, _ = gmsh.model.mesh.getNodes()
+    index = np.empty(int(node_tags.max()) + 1, dtype=np.int64)
+    index[node_tags.astype(np.int64)] = np.arange(len(node_tags))
+    return index, coords.reshape(-1, 3)[:, :2].copy()
+
+
+def compact(nodes: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nodes that elements use, renumbered compactly (gmsh keeps geometry points no element uses), and
+    every triangle counter-clockwise; returns nodes, triangles and the renumbering (old -> new)."""
+    used = np.zeros(len(nodes), bool)
+    used[triangles.ravel()] = True
+    renum = np.cumsum(used) - 1
+    nodes = nodes[used]
+    triangles = renum[triangles]
+    p = nodes[triangles[:, :3]]
+    area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
+    flip = area2 < 0
+    if flip.any():
+        t = triangles[flip]
+        triangles[flip] = t[:, [0, 2, 1, 5, 4, 3]] if triangles.shape[1] == 6 else t[:, [0, 2, 1]]
+    return nodes, triangles.astype(np.int64), renum
+
+
 def _run_gmsh(inputs: dict, key: str) -> Mesh:
     import gmsh
 
@@ -270,20 +307,7 @@ def _run_gmsh(inputs: dict, key: str) -> Mesh:
             fields.setNumber(4, "DistMin", inputs["size_instruments"])
             fields.setNumber(4, "DistMax", inputs["size_instruments"] + (inputs["size_far"] - inputs["size_instruments"]) / inputs["growth"])
             background.append(4)
-        fields.add("Min", 10)
-        fields.setNumbers(10, "FieldsList", background)
-        fields.setAsBackgroundMesh(10)
-        for opt, val in (("Mesh.MeshSizeExtendFromBoundary", 0), ("Mesh.MeshSizeFromPoints", 0),
-                         ("Mesh.MeshSizeFromCurvature", 0), ("Mesh.Algorithm", 6),
-                         ("Mesh.ElementOrder", inputs["order"]), ("Mesh.SecondOrderLinear", 0),
-                         ("Mesh.HighOrderOptimize", 0)):
-            gmsh.option.setNumber(opt, val)
-        gmsh.model.mesh.generate(2)
-
-        node_tags, coords, _ = gmsh.model.mesh.getNodes()
-        index = np.empty(int(node_tags.max()) + 1, dtype=np.int64)
-        index[node_tags.astype(np.int64)] = np.arange(len(node_tags))
-        nodes = coords.reshape(-1, 3)[:, :2].copy()
+        index, nodes = generate(gmsh, background, inputs["order"])
         tri_type = 9 if inputs["order"] == 2 else 2
         line_type = 8 if inputs["order"] == 2 else 1
         npe = 6 if inputs["order"] == 2 else 3
@@ -302,20 +326,7 @@ def _run_gmsh(inputs: dict, key: str) -> Mesh:
         gmsh.finalize()
     triangles = np.vstack(tris)
     region_arr = np.concatenate(region)
-    # drop nodes gmsh keeps for geometry points that no element uses, renumber compactly
-    used = np.zeros(len(nodes), bool)
-    used[triangles.ravel()] = True
-    renum = np.cumsum(used) - 1
-    nodes = nodes[used]
-    triangles = renum[triangles]
+    nodes, triangles, renum = compact(nodes, triangles)
     tunnel_edges = renum[np.vstack(edges)]
-    # counter-clockwise orientation for every triangle
-    p = nodes[triangles[:, :3]]
-    area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
-    flip = area2 < 0
-    if flip.any():
-        t = triangles[flip]
-        t = t[:, [0, 2, 1, 5, 4, 3]] if npe == 6 else t[:, [0, 2, 1]]
-        triangles[flip] = t
     return Mesh(nodes, triangles.astype(np.int64), region_arr, tuple(inputs["names"]),
                 tunnel_edges.astype(np.int64), key)

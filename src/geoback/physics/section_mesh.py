@@ -19,7 +19,7 @@ import numpy as np
 
 from geoback.case import layout as lay
 from geoback.case.schema import Case
-from geoback.physics.mesh import Mesh, cache_dir, gmsh_version, notice
+from geoback.physics.mesh import Mesh, cache_dir, compact, generate, gmsh_version, notice
 
 GMSH_CALLS = 0
 MESHER_VERSION = 5  # part of the cache key: raised when the meshing changes
@@ -236,19 +236,7 @@ def _run_gmsh(case: Case, inputs: dict, key: str) -> SectionMesh:
                 f.setNumber(fid, "VOut", 1e22)
                 f.setNumbers(fid, "SurfacesList", tags)
                 background.append(fid)
-        f.add("Min", 10)
-        f.setNumbers(10, "FieldsList", background)
-        f.setAsBackgroundMesh(10)
-        for opt, val in (("Mesh.MeshSizeExtendFromBoundary", 0), ("Mesh.MeshSizeFromPoints", 0),
-                         ("Mesh.MeshSizeFromCurvature", 0), ("Mesh.Algorithm", 6),
-                         ("Mesh.ElementOrder", inputs["order"]), ("Mesh.SecondOrderLinear", 0),
-                         ("Mesh.HighOrderOptimize", 0)):
-            gmsh.option.setNumber(opt, val)
-        gmsh.model.mesh.generate(2)
-        node_tags, coords, _ = gmsh.model.mesh.getNodes()
-        index = np.empty(int(node_tags.max()) + 1, dtype=np.int64)
-        index[node_tags.astype(np.int64)] = np.arange(len(node_tags))
-        nodes = coords.reshape(-1, 3)[:, :2].copy()
+        index, nodes = generate(gmsh, background, inputs["order"])
         npe = 6 if inputs["order"] == 2 else 3
         tri_type = 9 if npe == 6 else 2
         tris, surface_of = [], []
@@ -261,17 +249,8 @@ def _run_gmsh(case: Case, inputs: dict, key: str) -> SectionMesh:
         gmsh.finalize()
     triangles = np.vstack(tris)
     surface_of = np.concatenate(surface_of)
-    used = np.zeros(len(nodes), bool)
-    used[triangles.ravel()] = True
-    renum = np.cumsum(used) - 1
-    nodes = nodes[used]
-    triangles = renum[triangles]
+    nodes, triangles, _ = compact(nodes, triangles)
     p = nodes[triangles[:, :3]]
-    area2 = (p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1]) - (p[:, 2, 0] - p[:, 0, 0]) * (p[:, 1, 1] - p[:, 0, 1])
-    flip = area2 < 0
-    if flip.any():
-        t = triangles[flip]
-        triangles[flip] = t[:, [0, 2, 1, 5, 4, 3]] if npe == 6 else t[:, [0, 2, 1]]
     c = p.mean(axis=1)
     layer = np.clip(np.searchsorted(np.asarray(inputs["tops"]), -c[:, 1], side="right") - 1, 0, len(inputs["tops"]) - 1)
     part = -np.ones(len(triangles), np.int64)
