@@ -88,7 +88,7 @@ from geoback.errors import ForwardFailure, GeobackError
 from geoback.physics.excavation import ExcavationSimulation
 from geoback.physics.ground import COMPLEX_STEP
 from geoback.physics.names import Names
-from geoback.physics.plastic import ANTICIPATE, DEG, UNMODELLED, Runs, Watch, one_thread
+from geoback.physics.plastic import DEG, UNMODELLED, Runs, Watch, one_thread
 from geoback.physics.plastic_zone import PlasticZone, equivalent_plastic_strain, measure
 from geoback.physics.plasticity.linear import Counters as EngineCounters
 from geoback.physics.simulation import Field, Prediction
@@ -330,33 +330,10 @@ class YieldingExcavationSimulation(ExcavationSimulation):
             raise ForwardFailure(f"the in-situ stress exceeds the Mohr-Coulomb strength at these values at "
                                  f"{int(outside.sum())} of {self.ops.npts} points (layer {', '.join(layers)})")
 
-    def _names_to_compute(self, values: Mapping, wrt: Seq[str]) -> tuple:
-        """The values a new run differentiates: those asked, or for a readings-only run shortly after
-        a sensitivity request, those asked then (``plastic.py``)."""
-        if wrt:
-            return tuple(wrt)
-        self._runs.plain_requests += 1
-        if self._runs.plain_requests <= ANTICIPATE:
-            return tuple(n for n in self._runs.wanted if n in values)
-        return ()
-
     def solution(self, values: Mapping, wrt: Seq[str] = ()) -> _Run:
-        """The staged elastoplastic solution at `values` with du/dv for `wrt` (the last ones reused)."""
-        key = tuple(sorted(values.items()))
-        runs = self._runs
-        if wrt:
-            runs.wanted, runs.plain_requests = tuple(wrt), 0
-        run = runs.remembered(key, wrt)
-        if run is not None:
-            if wrt:
-                runs.kept = run
-            return run
-        names = self._names_to_compute(values, wrt)
-        run = self._solve(values, key, names)
-        runs.run = run
-        if wrt:
-            runs.kept = run
-        return run
+        """The staged elastoplastic solution at `values` with du/dv for `wrt` (the last ones reused:
+        ``plastic.Runs.answer``)."""
+        return self._runs.answer(values, wrt, lambda key, names: self._solve(values, key, names))
 
     def _solve(self, values: Mapping, key: tuple, names: tuple) -> _Run:
         """The stage recursion (R1)-(R3)."""

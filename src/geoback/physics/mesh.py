@@ -212,6 +212,38 @@ def _remove_stale_temporaries(folder: Path) -> None:
             pass
 
 
+def graded_fields(gmsh, curves: list[int], size_wall: float, size_far: float, growth: float, points=(),
+                  size_points: float | None = None) -> list[int]:
+    """Size fields: `size_wall` on `curves` growing linearly by `growth` of the distance up to `size_far`
+    (a graded mesh, ~log(domain / R) elements), and with `points` and `size_points` the same around
+    those points (instruments); returns the fields' ids for ``generate``."""
+    fields = gmsh.model.mesh.field
+    fields.add("Distance", 1)
+    fields.setNumbers(1, "CurvesList", curves)
+    fields.setNumber(1, "Sampling", 200)
+    fields.add("Threshold", 2)
+    fields.setNumber(2, "InField", 1)
+    fields.setNumber(2, "SizeMin", size_wall)
+    fields.setNumber(2, "SizeMax", size_far)
+    fields.setNumber(2, "DistMin", 0.0)
+    fields.setNumber(2, "DistMax", (size_far - size_wall) / growth)
+    background = [2]
+    if len(points) and size_points:
+        occ = gmsh.model.occ
+        pts = [occ.addPoint(x, y, 0) for x, y in points]
+        occ.synchronize()
+        fields.add("Distance", 3)
+        fields.setNumbers(3, "PointsList", pts)
+        fields.add("Threshold", 4)
+        fields.setNumber(4, "InField", 3)
+        fields.setNumber(4, "SizeMin", size_points)
+        fields.setNumber(4, "SizeMax", size_far)
+        fields.setNumber(4, "DistMin", size_points)
+        fields.setNumber(4, "DistMax", size_points + (size_far - size_points) / growth)
+        background.append(4)
+    return background
+
+
 def generate(gmsh, background: list[int], order: int) -> tuple[np.ndarray, np.ndarray]:
     """Mesh with the minimum of the size fields `background` (nothing else sets sizes), quadratic
     elements straight-sided where the geometry is (no high-order optimisation); returns the map from
@@ -283,30 +315,8 @@ def _run_gmsh(inputs: dict, key: str) -> Mesh:
                 gmsh.model.addPhysicalGroup(2, tags, tag=i + 1, name=inputs["names"][i])
         gmsh.model.addPhysicalGroup(1, tunnel, tag=100, name="tunnel")
 
-        fields = gmsh.model.mesh.field
-        fields.add("Distance", 1)
-        fields.setNumbers(1, "CurvesList", tunnel)
-        fields.setNumber(1, "Sampling", 200)
-        fields.add("Threshold", 2)
-        fields.setNumber(2, "InField", 1)
-        fields.setNumber(2, "SizeMin", inputs["size_tunnel"])
-        fields.setNumber(2, "SizeMax", inputs["size_far"])
-        # element size grows linearly away from the wall (graded mesh, ~log(domain/R) elements)
-        fields.setNumber(2, "DistMin", 0.0)
-        fields.setNumber(2, "DistMax", (inputs["size_far"] - inputs["size_tunnel"]) / inputs["growth"])
-        background = [2]
-        if inputs["instrument_points"]:
-            pts = [occ.addPoint(x, y, 0) for x, y in inputs["instrument_points"]]
-            occ.synchronize()
-            fields.add("Distance", 3)
-            fields.setNumbers(3, "PointsList", pts)
-            fields.add("Threshold", 4)
-            fields.setNumber(4, "InField", 3)
-            fields.setNumber(4, "SizeMin", inputs["size_instruments"])
-            fields.setNumber(4, "SizeMax", inputs["size_far"])
-            fields.setNumber(4, "DistMin", inputs["size_instruments"])
-            fields.setNumber(4, "DistMax", inputs["size_instruments"] + (inputs["size_far"] - inputs["size_instruments"]) / inputs["growth"])
-            background.append(4)
+        background = graded_fields(gmsh, tunnel, inputs["size_tunnel"], inputs["size_far"], inputs["growth"],
+                                   inputs["instrument_points"], inputs["size_instruments"])
         index, nodes = generate(gmsh, background, inputs["order"])
         tri_type = 9 if inputs["order"] == 2 else 2
         line_type = 8 if inputs["order"] == 2 else 1

@@ -122,6 +122,28 @@ class Runs:
                 return run
         return None
 
+    def answer(self, values: Mapping, wrt: Sequence[str], compute) -> _Run:
+        """The run at `values` with du/dv for `wrt`: a remembered one, or `compute(key, names)` (a new run
+        differentiating `names`: those asked, or for a readings-only run shortly after a sensitivity
+        request, those asked then). A run asked with sensitivities is kept."""
+        key = tuple(sorted(values.items()))
+        if wrt:
+            self.wanted, self.plain_requests = tuple(wrt), 0
+        run = self.remembered(key, wrt)
+        if run is None:
+            run = self.run = compute(key, self._names_to_compute(values, wrt))
+        if wrt:
+            self.kept = run
+        return run
+
+    def _names_to_compute(self, values: Mapping, wrt: Sequence[str]) -> tuple:
+        if wrt:
+            return tuple(wrt)
+        self.plain_requests += 1
+        if self.plain_requests <= ANTICIPATE:
+            return tuple(n for n in self.wanted if n in values)
+        return ()
+
 
 class Watch:
     """A run's progress lines (after FIRST_WORDS seconds, then every EVERY seconds: stage, increment,
@@ -267,30 +289,14 @@ class PlasticSimulation(Simulation):
                              f"{names[k]} = {lam[k]:.4g}{before}")
 
     # ------------------------------------------------------------------ forward
-    def _names_to_compute(self, values: Mapping, wrt: Sequence[str]) -> tuple:
-        """The values a new run differentiates: those asked, or for a readings-only run shortly after
-        a sensitivity request, those asked then."""
-        if wrt:
-            return tuple(wrt)
-        self._runs.plain_requests += 1
-        if self._runs.plain_requests <= ANTICIPATE:
-            return tuple(n for n in self._runs.wanted if n in values)
-        return ()
-
     def solution(self, values: Mapping, wrt: Sequence[str] = ()) -> _Run:
-        """The non-linear solution at `values` with du/dv for `wrt` (the last one is reused)."""
+        """The non-linear solution at `values` with du/dv for `wrt` (the last one is reused: ``Runs.answer``)."""
+        return self._runs.answer(values, wrt, lambda key, names: self._solve(values, key, names))
+
+    def _solve(self, values: Mapping, key: tuple, names: tuple) -> _Run:
         from geoback.physics.plasticity import NonConvergence, solve
 
-        key = tuple(sorted(values.items()))
         runs = self._runs
-        if wrt:
-            runs.wanted, runs.plain_requests = tuple(wrt), 0
-        run = runs.remembered(key, wrt)
-        if run is not None:
-            if wrt:
-                runs.kept = run
-            return run
-        names = self._names_to_compute(values, wrt)
         self._check_strength(values)
         mat, sigma0, f, lam = self._inputs(values)
         self._check_releases(np.real(lam))
@@ -314,10 +320,7 @@ class PlasticSimulation(Simulation):
         self._count(res.counters)
         watch.done(res.counters)
         runs.warm = res.warm
-        runs.run = _Run(key, tuple(names), res.u, res.du_dp, res)
-        if wrt:
-            runs.kept = runs.run
-        return runs.run
+        return _Run(key, tuple(names), res.u, res.du_dp, res)
 
     def _count(self, c) -> None:
         """Add a solver run's counters (plasticity.linear.Counters) to the simulation's."""

@@ -19,7 +19,7 @@ import numpy as np
 
 from geoback.case import layout as lay
 from geoback.case.schema import Case
-from geoback.physics.mesh import Mesh, cache_dir, compact, generate, gmsh_version, notice
+from geoback.physics.mesh import Mesh, cache_dir, compact, generate, gmsh_version, graded_fields, notice
 
 GMSH_CALLS = 0
 MESHER_VERSION = 5  # part of the cache key: raised when the meshing changes
@@ -145,7 +145,6 @@ def _run_gmsh(case: Case, inputs: dict, key: str) -> SectionMesh:
         gmsh.model.add(key)
         occ = gmsh.model.occ
         surfaces = [(2, occ.addRectangle(x0, -tops[i + 1], 0, x1 - x0, tops[i + 1] - tops[i])) for i in range(len(tops) - 1)]
-        wall_curves = []
         for op in g.openings:
             whole = _surface(occ, lay.outline(op))
             pieces = [(2, whole)]
@@ -198,33 +197,9 @@ def _run_gmsh(case: Case, inputs: dict, key: str) -> SectionMesh:
         if outside:
             occ.remove(outside, recursive=True)
             occ.synchronize()
-        for _, tag in gmsh.model.getEntities(1):
-            wall_curves.append(tag)
-        wall = _wall_curves(g, gmsh)
         f = gmsh.model.mesh.field
-        f.add("Distance", 1)
-        f.setNumbers(1, "CurvesList", wall)
-        f.setNumber(1, "Sampling", 200)
-        f.add("Threshold", 2)
-        f.setNumber(2, "InField", 1)
-        f.setNumber(2, "SizeMin", inputs["size_wall"])
-        f.setNumber(2, "SizeMax", inputs["size_far"])
-        f.setNumber(2, "DistMin", 0.0)
-        f.setNumber(2, "DistMax", (inputs["size_far"] - inputs["size_wall"]) / inputs["growth"])
-        background = [2]
-        if inputs["points"] and inputs["size_instruments"]:
-            pts = [occ.addPoint(x, y, 0) for x, y in inputs["points"]]
-            occ.synchronize()
-            f.add("Distance", 3)
-            f.setNumbers(3, "PointsList", pts)
-            f.add("Threshold", 4)
-            f.setNumber(4, "InField", 3)
-            si = inputs["size_instruments"]
-            f.setNumber(4, "SizeMin", si)
-            f.setNumber(4, "SizeMax", inputs["size_far"])
-            f.setNumber(4, "DistMin", si)
-            f.setNumber(4, "DistMax", si + (inputs["size_far"] - si) / inputs["growth"])
-            background.append(4)
+        background = graded_fields(gmsh, _wall_curves(g, gmsh), inputs["size_wall"], inputs["size_far"],
+                                   inputs["growth"], inputs["points"], inputs["size_instruments"])
         surf_tags = [t for _, t in gmsh.model.getEntities(2)]
         alive = set(surf_tags)
         band_surfaces = [sorted({t for i in idx for d, t in fragments[i] if d == 2 and t in alive}) for idx in band_inputs]
