@@ -322,7 +322,15 @@ def _instrument_list_problems(case: Case) -> list[tuple[tuple, str]]:
         if inames.index(n) != i:
             problems.append((("instruments", i, "name"),
                              f"expected unique instrument names, found '{n}' again (as in instruments[{inames.index(n)}])"))
+    c = case.construction
+    supports = [x.name for x in ((c.props or []) + (c.anchors or []) if c is not None and hasattr(c, "props") else [])]
     for i, ins in enumerate(case.instruments):
+        if ins.kind == "load_cell":
+            if ins.support not in supports:
+                problems.append((("instruments", i, "support"),
+                                 f"expected the name of a prop or anchor in construction.props or construction.anchors "
+                                 f"({', '.join(supports) or 'none in this case'}), found '{ins.support}'"))
+            continue
         problems.extend(_instrument_problems(g, i, ins))
         if ins.kind in ("inclinometer", "sliding_micrometer", "extensometer", "deflectometer"):
             n, field = _station_count(ins)

@@ -168,6 +168,10 @@ def construction_problems(case: Case) -> list[tuple[tuple, str]]:
     if c is None:
         return []
     at, out = ("construction",), []
+    for field in ("linings", "walls", "props", "anchors"):
+        if getattr(c, field):
+            out.append((at + (field,), f"expected '{field}:' only in a case with openings (geometry: {{model, width, "
+                                       f"depth, openings}}), found it with a circular tunnel"))
     names = [s.name for s in c.stages]
     for i, n in enumerate(names):
         if names.index(n) != i:

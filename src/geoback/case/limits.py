@@ -53,3 +53,13 @@ QUANTITIES: dict[str, tuple[str, Limits]] = {
 }
 # The lining's own values (E[shotcrete], nu[shotcrete]): the same units, a lining's usual ranges
 LINING: dict[str, tuple[str, Limits]] = {"E": ("kPa", LINING_MODULUS), "nu": ("-", LINING_POISSON)}
+
+# Retaining structures (case/supports.py): a wall is concrete or steel (1 GPa .. 250 GPa usual); a prop's
+# or an anchor's axial stiffness per metre run k [kN/m per m] and its preload (lock-off) per metre run
+# [kN/m]. A stiffness under 100 kN/m/m or over 1e8 is unusual for a structural support (a unit slip).
+WALL_MODULUS = Limits(MODULUS.lo, MODULUS.hi, (1e6, 2.5e8), "a concrete or steel wall")
+WALL_POISSON = Limits(POISSON.lo, POISSON.hi, POISSON.plausible, "a concrete or steel wall")
+SUPPORT_STIFFNESS = Limits(1e-6, 1e12, (1e2, 1e8), "a prop or anchor")
+PRELOAD = Limits(0.0, 1e6, (0.0, 5e3), "a prop or anchor")
+WALL: dict[str, tuple[str, Limits]] = {"E": ("kPa", WALL_MODULUS), "nu": ("-", WALL_POISSON)}
+SUPPORT: dict[str, tuple[str, Limits]] = {"k": ("kN/m/m", SUPPORT_STIFFNESS), "preload": ("kN/m", PRELOAD)}

@@ -264,7 +264,7 @@ class MeshSettings(Strict):
 
 
 NAME = r"^[A-Za-z0-9_\-.]+$"
-READING_UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "rad": 1.0, "mrad": 1e-3, "1/m": 1.0}
+READING_UNITS = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "rad": 1.0, "mrad": 1e-3, "1/m": 1.0, "kN": 1.0, "MN": 1e3}
 
 
 def _readings_shape(value: Any) -> str:
@@ -307,9 +307,9 @@ class _Instrument(Strict):
                           "stage columns; a unit in the header such as 'reading [mm]'. Every column is used, mapped "
                           "(`columns`) or listed in `ignore_columns`; a reading written '', -, n/a or NaN is missing "
                           "and dropped with its row and column of C_x")
-    readings_unit: Optional[Literal["m", "mm", "cm", "rad", "mrad", "1/m"]] = Field(
+    readings_unit: Optional[Literal["m", "mm", "cm", "rad", "mrad", "1/m", "kN", "MN"]] = Field(
         None, description="unit of the readings (default SI: m for displacements and length changes, rad for slopes, "
-                          "1/m for curvatures)")
+                          "1/m for curvatures, kN for load cells)")
     stage: Optional[StageName] = Field(
         None, description="construction stage the readings were taken at, for a readings file without a stage column "
                           "or a list of inline readings (needed when the case has several construction stages)")
@@ -420,8 +420,19 @@ class Convergence(_Instrument):
     sigma: PositiveLength = Field(description="standard deviation of the reading [m]")
 
 
+class LoadCell(_Instrument):
+    """A load cell on a prop or an anchor: reads the axial force of one prop or anchor [kN] (a prop's
+    compression, an anchor's tension; per metre run when the support gives no spacing), less the cell's
+    own reading at installation (`zero`)."""
+
+    kind: Literal["load_cell"]
+    support: str = Field(pattern=NAME, description="the prop or anchor it reads (construction.props / anchors)")
+    sigma: Positive = Field(description="standard deviation of one reading [kN]")
+    zero: Num = Field(0.0, description="the cell's reading at installation [kN], subtracted from every reading")
+
+
 Instrument = Annotated[Union[PointsInstrument, Inclinometer, SlidingMicrometer, Deflectometer,
-                             Convergence], Field(discriminator="kind")]
+                             Convergence, LoadCell], Field(discriminator="kind")]
 
 
 class Prior(Strict):
@@ -546,6 +557,94 @@ class PlacedLining(Lining):
                                                             "along the cut lines of the part `on` (a temporary invert)")
 
 
+_LINE_FORCE_UNITS = {"kn/m": 1.0, "mn/m": 1e3}
+_SPRING_UNITS = {"kn/m/m": 1.0, "mn/m/m": 1e3, "kn/m2": 1.0, "mn/m2": 1e3, "kpa": 1.0, "mpa": 1e3}
+
+
+def _line_force(value: Any) -> Any:
+    """A force per metre run [kN/m]: a number, or '450 kN/m', '0.5 MN/m' (a force per prop is divided by
+    the spacing first: 'kN' alone is refused)."""
+    return _with_unit(value, _LINE_FORCE_UNITS, "kn/m", "force per metre run", "kN/m or MN/m (per metre run)",
+                      f"expected a force per metre run: a number in kN/m or with a unit like '300 kN/m', found "
+                      f"{shown(value)}")
+
+
+def _spring(value: Any) -> Any:
+    """A stiffness per metre run [kN/m per m]: a number, or '5e4 kN/m/m', '50 MN/m/m'."""
+    return _with_unit(value, _SPRING_UNITS, "kn/m/m", "stiffness per metre run", "kN/m/m or MN/m/m",
+                      f"expected a stiffness per metre run: a number in kN/m/m or with a unit like '50 MN/m/m', "
+                      f"found {shown(value)}")
+
+
+LineForce = Annotated[float, BeforeValidator(_line_force)]
+Spring = Annotated[float, BeforeValidator(_spring)]
+_SUPPORT_NAME = r"^[A-Za-z_][A-Za-z0-9_\-]*$"
+
+
+class Wall(Strict):
+    """An embedded retaining wall (diaphragm, secant-pile, sheet-pile): a vertical band of its real
+    thickness centred on `x`, from depth `top` to `toe`, meshed with the ground in quadratic elements
+    (`layers` through its thickness) and switched to the wall's material when installed (in place from
+    the start unless a stage installs it). Give `thickness` and `E`, or the section's `EA` and `EI` per
+    metre run (the band then has t = sqrt(12 EI / EA) and E = EA / t)."""
+
+    name: str = Field(pattern=_SUPPORT_NAME, description="wall name (its values are E[name] and nu[name])")
+    x: Length = Field(description="x of the wall's centreline [m]")
+    top: NonNegativeLength = Field(0.0, description="depth of the wall's top [m] (0: the ground surface)")
+    toe: PositiveLength = Field(description="depth of the wall's toe [m]")
+    thickness: Optional[PositiveLength] = Field(None, description="thickness [m] (with E)")
+    E: Optional[Stress] = Field(None, gt=0, description="Young's modulus [kPa] (or '30 GPa'), with thickness")
+    EA: Optional[Positive] = Field(None, description="axial stiffness per metre run [kN/m] (with EI)")
+    EI: Optional[Positive] = Field(None, description="bending stiffness per metre run [kNm2/m] (with EA)")
+    nu: Num = Field(ge=0.0, lt=0.5, description="Poisson's ratio of the wall, 0 <= nu < 0.5")
+    layers: Annotated[int, BeforeValidator(_whole), Field(ge=2, le=8)] = Field(
+        3, description="quadratic elements through the wall's thickness (bending needs at least 2)")
+
+
+class Prop(Strict):
+    """A prop (strut, slab) at a depth on a wall, installed by a stage: a spring of axial stiffness per
+    metre run `stiffness`, or E * area / (spacing * length); to a fixed point (the symmetry plane of a
+    half-model: the spring has half the prop's length) or to another wall (`to`). Stress-free when
+    installed, or carrying `preload` from then on."""
+
+    name: str = Field(pattern=_SUPPORT_NAME, description="prop name (its values are k[name] and preload[name])")
+    wall: str = Field(pattern=_SUPPORT_NAME, description="the wall it props")
+    depth: NonNegativeLength = Field(description="depth of the prop's axis [m]")
+    to: Optional[str] = Field(None, pattern=_SUPPORT_NAME, description="the wall at its other end (default: a "
+                                                                        "fixed point, the symmetry plane of a half-model)")
+    stiffness: Optional[Spring] = Field(None, gt=0, description="axial stiffness per metre run [kN/m/m]")
+    E: Optional[Stress] = Field(None, gt=0, description="Young's modulus of the prop [kPa] (with area, spacing)")
+    area: Optional[Annotated[float, BeforeValidator(_number), Field(gt=0)]] = Field(
+        None, description="cross-section area of one prop [m2]")
+    spacing: Optional[PositiveLength] = Field(None, description="horizontal spacing of the props along the wall [m] "
+                                                                 "(1: a slab, or per metre run)")
+    length: Optional[PositiveLength] = Field(None, description="prop length [m] (default: from wall to wall, or "
+                                                                "twice the distance to the symmetry plane)")
+    preload: LineForce = Field(0.0, ge=0, description="preload per metre run [kN/m] applied at installation")
+
+
+class Anchor(Strict):
+    """A ground anchor from a wall point at `depth`, inclined `angle` degrees below the horizontal into
+    the retained ground: a free length acting as a spring (`stiffness`, or E * area / (spacing *
+    free_length)), and a fixed length bonded to the ground (the anchor force passes into the ground
+    evenly along it). Locked off at `preload` when installed."""
+
+    name: str = Field(pattern=_SUPPORT_NAME, description="anchor name (its values are k[name] and preload[name])")
+    wall: str = Field(pattern=_SUPPORT_NAME, description="the wall it holds")
+    depth: NonNegativeLength = Field(description="depth of the anchor head on the wall [m]")
+    angle: Annotated[float, BeforeValidator(_number), Field(ge=0, lt=90)] = Field(
+        description="inclination below the horizontal [degrees]")
+    free_length: PositiveLength = Field(description="free (tendon) length [m]")
+    fixed_length: PositiveLength = Field(description="fixed (grouted, bonded) length [m]")
+    stiffness: Optional[Spring] = Field(None, gt=0, description="axial stiffness of the free length per metre run "
+                                                                "[kN/m/m]")
+    E: Optional[Stress] = Field(None, gt=0, description="Young's modulus of the tendon [kPa] (with area, spacing)")
+    area: Optional[Annotated[float, BeforeValidator(_number), Field(gt=0)]] = Field(
+        None, description="cross-section area of one tendon [m2]")
+    spacing: Optional[PositiveLength] = Field(None, description="horizontal spacing of the anchors [m]")
+    preload: LineForce = Field(0.0, ge=0, description="lock-off load per metre run [kN/m]")
+
+
 class Stage(Strict):
     """One construction step. In a stage the lining named by `install` is placed first (stress-free,
     on the wall as it has moved so far), then the in-situ stress on the tunnel wall is released up to
@@ -558,7 +657,8 @@ class Stage(Strict):
         None, description="cumulative fraction of the in-situ stress on the tunnel wall released by the end of "
                           "this stage (beta_k, 0 < beta <= 1, increasing from stage to stage)")
     install: Optional[Union[str, list[str]]] = Field(None, description="name(s) of the lining(s) installed at the "
-                                                                      "start of this stage")
+                                                                      "start of this stage (with openings: "
+                                                                      "linings, walls, props or anchors)")
     excavate: Optional[list[str]] = Field(None, description="with openings: parts or openings excavated (their "
                                                             "elements removed) in this stage")
     remove: Optional[list[str]] = Field(None, description="with openings: linings removed in this stage (a "
@@ -571,6 +671,9 @@ class Construction(Strict):
     lining: Optional[Lining] = Field(None, description="the lining (installed by a stage's 'install')")
     linings: Optional[list[PlacedLining]] = Field(None, description="with openings: the linings, each placed on an "
                                                                     "opening's or a part's wall")
+    walls: Optional[list[Wall]] = Field(None, description="with openings: embedded retaining walls")
+    props: Optional[list[Prop]] = Field(None, description="with openings: props (struts, slabs) on the walls")
+    anchors: Optional[list[Anchor]] = Field(None, description="with openings: ground anchors on the walls")
     stages: list[Stage] = Field(min_length=1, description="construction stages in order")
 
 

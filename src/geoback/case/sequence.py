@@ -55,6 +55,17 @@ class Sequence:
     groups: tuple[int, ...]
     values: dict
     linings: dict  # name -> schema.PlacedLining
+    walls: dict = None  # name -> supports.WallBand
+    connectors: dict = None  # name -> supports.Connector (props and anchors)
+
+    def installed_at(self, name: str) -> int:
+        """The stage that installs a lining, wall, prop or anchor (-1: a wall in place from the start)."""
+        return next((k for k, s in enumerate(self.steps) if name in s.install), -1)
+
+    @property
+    def bands(self) -> tuple[str, ...]:
+        """What the mesh holds as bands of elements: the linings, then the walls."""
+        return tuple(self.linings) + tuple(self.walls or {})
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -69,7 +80,7 @@ class Sequence:
         expand = _expander(layout)
         if c is None:
             everything = tuple(n for op in layout.openings for n in expand(op.name))
-            return cls((Step(DEFAULT_STAGE, everything, (), (), None, (0,)),), (0,), {}, {})
+            return cls((Step(DEFAULT_STAGE, everything, (), (), None, (0,)),), (0,), {}, {}, {}, {})
         steps, groups, values, open_groups = [], [], {}, []
         for k, s in enumerate(c.stages):
             excavate = tuple(n for name in (s.excavate or []) for n in expand(name))
@@ -89,29 +100,52 @@ class Sequence:
                 if not release:
                     open_groups = []
             steps.append(Step(s.name, excavate, remove, install, release, releases))
-        return cls(tuple(steps), tuple(groups), values, {ln.name: ln for ln in (c.linings or [])})
+        from geoback.case.supports import connectors, walls
+
+        return cls(tuple(steps), tuple(groups), values, {ln.name: ln for ln in (c.linings or [])}, walls(case),
+                   connectors(case))
 
     # ------------------------------------------------------------------ names (a source for physics.names.Names)
     def lining_names(self) -> list[str]:
         return [f"{q}[{n}]" for n in self.linings for q in ("E", "nu")]
 
+    def structure_names(self) -> list[str]:
+        """E[wall], nu[wall] of every wall; k[support], preload[support] of every prop and anchor."""
+        return ([f"{q}[{n}]" for n in (self.walls or {}) for q in ("E", "nu")]
+                + [f"{q}[{n}]" for n in (self.connectors or {}) for q in ("k", "preload")])
+
     def quantities(self) -> dict[str, float]:
         out = dict(self.values)
         for n, ln in self.linings.items():
             out[f"E[{n}]"], out[f"nu[{n}]"] = float(ln.E), float(ln.nu)
+        for n, w in (self.walls or {}).items():
+            out[f"E[{n}]"], out[f"nu[{n}]"] = w.E, w.nu
+        for n, cn in (self.connectors or {}).items():
+            out[f"k[{n}]"], out[f"preload[{n}]"] = cn.stiffness, cn.preload
         return out
 
     def knows(self, name: str) -> bool:
-        return name in self.values or name in self.lining_names()
+        return name in self.values or name in self.lining_names() or name in self.structure_names()
 
     def canonical(self, name: str) -> str | None:
         return name if self.knows(name) else None
 
+    def _table(self, name: str) -> dict:
+        from geoback.case.limits import SUPPORT, WALL
+
+        stem, _, owner = name.partition("[")
+        owner = owner[:-1]
+        if owner in (self.walls or {}):
+            return WALL
+        if owner in (self.connectors or {}):
+            return SUPPORT
+        return QUANTITIES
+
     def unit(self, name: str) -> str | None:
-        return QUANTITIES[name.partition("[")[0]][0] if self.knows(name) else None
+        return self._table(name)[name.partition("[")[0]][0] if self.knows(name) else None
 
     def limits(self, name: str, values: Mapping) -> Limits | None:
-        return QUANTITIES[name.partition("[")[0]][1] if self.knows(name) else None
+        return self._table(name)[name.partition("[")[0]][1] if self.knows(name) else None
 
     # ------------------------------------------------------------------ the releases
     def fractions(self, values: Mapping) -> np.ndarray:
@@ -185,6 +219,7 @@ def sequence_problems(case: Case) -> list[tuple[tuple, str]]:
     known = set(regions(layout)) | {op.name for op in layout.openings}
     expand = _expander(layout)
     linings = {ln.name: (j, ln) for j, ln in enumerate(c.linings or [])}
+    structures = {x.name for x in (c.walls or []) + (c.props or []) + (c.anchors or [])}
     for j, ln in enumerate(c.linings or []):
         where = at + ("linings", j)
         if ln.on not in known:
@@ -229,9 +264,14 @@ def sequence_problems(case: Case) -> list[tuple[tuple, str]]:
         install = [s.install] if isinstance(s.install, str) else (s.install or [])
         for j, n in enumerate(install):
             key = here + ("install",) + ((j,) if not isinstance(s.install, str) else ())
+            if n in structures:
+                if n in installed:
+                    out.append((key, f"expected '{n}' installed once, found it installed again"))
+                installed.setdefault(n, i)
+                continue
             if n not in linings:
-                out.append((key, f"expected the name of a lining in construction.linings "
-                                 f"({', '.join(linings) or 'none'}), found '{n}'"))
+                out.append((key, f"expected the name of a lining, wall, prop or anchor in construction "
+                                 f"({', '.join(list(linings) + sorted(structures)) or 'none'}), found '{n}'"))
                 continue
             if n in installed:
                 out.append((key, f"expected lining '{n}' installed once, found it installed again"))
@@ -244,7 +284,10 @@ def sequence_problems(case: Case) -> list[tuple[tuple, str]]:
                                  f"'{missing[0]}' not yet excavated at stage '{s.name}'"))
             installed[n] = i
         for j, n in enumerate(s.remove or []):
-            if n not in installed:
+            if n in structures:
+                out.append((here + ("remove", j), f"expected a lining to remove, found '{n}' (removing walls, props "
+                                                  f"and anchors is not modelled)"))
+            elif n not in installed:
                 out.append((here + ("remove", j), f"expected a lining installed in an earlier stage, found '{n}'"))
             elif n in removed:
                 out.append((here + ("remove", j), f"expected lining '{n}' removed once, found it removed again"))
@@ -257,6 +300,10 @@ def sequence_problems(case: Case) -> list[tuple[tuple, str]]:
             open_groups = open_groups or s.release is not None
         elif s.release is None:
             open_groups = False
+    if c.walls or c.props or c.anchors:
+        from geoback.case.supports import support_problems
+
+        out += support_problems(case, installed, excavated)
     for n, (j, ln) in linings.items():
         if n not in installed:
             out.append((at + ("linings", j), f"expected lining '{n}' installed by a stage, found no stage installing it"))

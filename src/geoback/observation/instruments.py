@@ -195,6 +195,13 @@ def build_block(ins, loaded: LoadedCase, index: int) -> InstrumentBlock:
                 labels.append(Reading(ins.name, kind, j + 1, ins.components[k], *pts[j]))
         return InstrumentBlock(ins.name, kind, index, pts, w, labels, np.eye(m) * ins.sigma ** 2,
                                np.zeros((m, 0)), [], sigma=ins.sigma)
+    if kind == "load_cell":  # the force is the simulation's (its support's connector), not a displacement
+        from geoback.case.supports import connectors
+
+        head = np.array([connectors(loaded.case)[ins.support].head], float)
+        labels = [Reading(ins.name, kind, 1, "N", *head[0])]
+        return InstrumentBlock(ins.name, kind, index, head, np.zeros((1, 1, 2)), labels, np.eye(1) * ins.sigma ** 2,
+                               np.zeros((1, 0)), [], sigma=ins.sigma)
     if kind == "convergence":
         a, b = np.asarray(ins.points[0], float), np.asarray(ins.points[1], float)
         if np.linalg.norm(b - a) == 0:

@@ -48,7 +48,7 @@ ROLE_WORDS = {  # what a column means -> its headers (lower case, unit removed, 
     "x": ("x", "offset"),
     "y": ("y",),
     "component": ("component", "comp"),
-    "reading": ("reading", "value", "measured", "displacement"),
+    "reading": ("reading", "value", "measured", "displacement", "force", "load"),
     "settlement": ("settlement", "setzung", "tassement"),  # positive down: u_y = -settlement
     "stage": ("stage", "construction stage", "phase"),
 }
@@ -346,14 +346,15 @@ def _whole(text: str) -> int | None:
 def _default_unit(block: InstrumentBlock) -> str:
     if block.reading_type == "primary":
         return LINEWISE_KINDS[block.kind].primary_unit
-    return "m"
+    return "kN" if block.kind == "load_cell" else "m"
 
 
 def _unit_factor(unit: str, block: InstrumentBlock, fail, where: str) -> float:
     u = {k.lower(): k for k in READING_UNITS}.get(unit.strip().lower(), unit.strip())  # 'MM' is mm here
     if u not in READING_UNITS:
         raise fail(f"{where}: expected a reading unit {', '.join(READING_UNITS)}, found '{unit}'")
-    kind = {"m": "length", "mm": "length", "cm": "length", "rad": "angle", "mrad": "angle", "1/m": "curvature"}
+    kind = {"m": "length", "mm": "length", "cm": "length", "rad": "angle", "mrad": "angle", "1/m": "curvature",
+            "kN": "force", "MN": "force"}
     if kind[u] != kind[_default_unit(block)]:
         raise fail(f"{where}: expected readings in a unit of {kind[_default_unit(block)]} for "
                    f"{block.kind} '{block.name}' ({block.reading_type} readings), found '{unit}'")
@@ -750,6 +751,8 @@ def read_readings(loaded: LoadedCase, blocks: list[InstrumentBlock], stages: lis
             for stage, v in sets.items():
                 if b.reading_type == "primary":
                     sets[stage] = b.integration @ v  # eqns 11, 15, 18 with the constants taken as zero
+                if b.kind == "load_cell":
+                    sets[stage] = v - ins.zero  # the force since installation: the cell's zero reading subtracted
         except CaseError as exc:
             errors.append(exc)
             if path is not None:

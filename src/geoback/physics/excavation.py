@@ -28,6 +28,7 @@ factorised (one modulus, no lining) reuses it (``stiffness.FactorCache``, eqns 4
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from typing import Mapping, Sequence as Seq
@@ -86,6 +87,8 @@ class _Run:
     u: np.ndarray
     du: np.ndarray | None
     wrt: tuple
+    e_ref: np.ndarray = None  # each connector's shortening / elongation when it was locked
+    de_ref: np.ndarray = None
 
 
 class ExcavationSimulation(Simulation):
@@ -121,6 +124,11 @@ class ExcavationSimulation(Simulation):
         self._local = -np.ones(fe.ne, np.int64)
         self._local[removable] = np.arange(len(removable))
         self._quad = fe.element_quadrature(removable) if len(removable) else None
+        from geoback.physics.supports import operators
+
+        self.connectors = dict(plan.connectors or {})
+        self._C = operators(fe, self.connectors)
+        self._installed = np.array([plan.installed_at(n) for n in self.connectors], int)
 
     # ------------------------------------------------------------------ set-up
     @staticmethod
@@ -169,9 +177,11 @@ class ExcavationSimulation(Simulation):
         ground, fe, mesh = self.ground, self.fe, self.mesh
         own = {k: v for k, v in values.items() if not (self.plan.knows(k) or self.weights.knows(k))}  # the ground's
         coeffs = ground.state(own).coeffs
-        linings = {}
-        for name in self.plan.linings:
+        linings = {}  # every band's D: the linings' and the walls'
+        for name in self.plan.bands:
             linings[name] = np.array(plane_strain_isotropic(values[f"E[{name}]"], values[f"nu[{name}]"]))
+        springs = np.array([values[f"k[{n}]"] for n in self.connectors])
+        preloads = np.array([values[f"preload[{n}]"] for n in self.connectors])
         gammas = self.weights.of_layers(values)
         dtype = complex if any(isinstance(v, complex) for v in values.values()) else float
         sig0 = gam = None
@@ -187,7 +197,7 @@ class ExcavationSimulation(Simulation):
             sig0 = np.stack([k0 * sv, sv, np.zeros_like(sv)], axis=-1)
             gam = np.array(gammas, dtype=dtype)[fe.region[self._removable]]
         return {"coeffs": coeffs, "linings": linings, "sigma0": sig0, "gamma": gam, "release": release,
-                "fractions": self.plan.fractions(values)}
+                "fractions": self.plan.fractions(values), "springs": springs, "preloads": preloads}
 
     def _overburden(self, depth: np.ndarray, gammas, dtype) -> np.ndarray:
         tops = self.ground.tops
@@ -202,7 +212,8 @@ class ExcavationSimulation(Simulation):
             return {"coeffs": np.zeros_like(base["coeffs"]), "linings": {k: np.zeros(4) for k in base["linings"]},
                     "sigma0": None if base["sigma0"] is None else np.zeros_like(base["sigma0"]),
                     "gamma": None if base["gamma"] is None else np.zeros_like(base["gamma"]), "release": 0.0,
-                    "fractions": self.plan.fractions_derivative(name)}
+                    "fractions": self.plan.fractions_derivative(name), "springs": np.zeros(len(self.connectors)),
+                    "preloads": np.zeros(len(self.connectors))}
         v = dict(values)
         h = COMPLEX_STEP * max(1.0, abs(values[name]))
         v[name] = values[name] + 1j * h
@@ -229,13 +240,21 @@ class ExcavationSimulation(Simulation):
         mesh, plan = self.mesh, self.plan
         mat = np.where(self.removed_at <= k, -1, 0)
         names = list(mesh.band_names)
+        for n in plan.walls or {}:  # a wall in place from the start
+            if plan.installed_at(n) < 0:
+                mat[mesh.band == names.index(n)] = 1 + names.index(n)
         for j in range(k + 1):
             step = plan.steps[j]
             for n in step.install:
-                mat[mesh.band == names.index(n)] = 1 + names.index(n)
+                if n in names:
+                    mat[mesh.band == names.index(n)] = 1 + names.index(n)
             for n in step.remove:
                 mat[mesh.band == names.index(n)] = -1
         return mat
+
+    def _springs_at(self, k: int) -> np.ndarray:
+        """Which connectors act at stage k (installed by then)."""
+        return self._installed <= k
 
     def _coeffs(self, mat: np.ndarray, st: dict) -> np.ndarray:
         out = np.where((mat == 0)[:, None], st["coeffs"], 0.0)
@@ -261,12 +280,25 @@ class ExcavationSimulation(Simulation):
         idx = fe.free_index[dofs]
         return idx[idx >= 0]
 
-    def _factor(self, k: int, mat: np.ndarray, coeffs: np.ndarray, act: np.ndarray):
-        key = mat.tobytes()
+    def _factor(self, k: int, mat: np.ndarray, coeffs: np.ndarray, act: np.ndarray, on: np.ndarray, ks: np.ndarray):
+        """The factorisation of the configuration (elements `mat`, connectors `on` of stiffness `ks`) and
+        its scale (a configuration whose coefficients and springs are a multiple of the factorised one's
+        reuses it)."""
+        key = (mat.tobytes(), on.tobytes())
         cache = self.factors.get(key)
         if cache is None:
             cache = self.factors[key] = FactorCache(self.counters, self.backend)
-        return cache.factorised(coeffs, lambda: self.fe.matrix(coeffs)[act][:, act].tocsr())
+        springs = np.real(ks)[on]
+
+        def assemble():
+            K = self.fe.matrix(coeffs)[act][:, act].tocsr()
+            if on.any():
+                from geoback.physics.supports import spring_matrix
+
+                K = (K + spring_matrix(self._C[on], springs, act)).tocsr()
+            return K
+
+        return cache.factorised(np.concatenate([np.ravel(coeffs), springs]), assemble)
 
     # ------------------------------------------------------------------ removal loads
     def _removal_load(self, elems: np.ndarray, mat: np.ndarray, st: dict, u: np.ndarray, uref: dict,
@@ -364,13 +396,17 @@ class ExcavationSimulation(Simulation):
         release = st["release"]
         frac = np.real(st["fractions"])
         prev_mat = self._material(-1)
+        ks = np.real(st["springs"])
+        e_ref = np.zeros(len(self.connectors))  # each connector's e at installation (after its preload)
+        de_ref = np.zeros((len(self.connectors), nw))
         self.counters.forward_runs += 1
         for k, step in enumerate(plan.steps):
             mat = self._material(k)
             if step.excavate or step.remove:
                 # removed, or ground replaced by a lining installed in the stage that excavates it (its
-                # ground stress is released like the rest of the part's; the lining starts stress-free)
-                gone = np.flatnonzero((prev_mat >= 0) & (mat != prev_mat))
+                # ground stress is released like the rest of the part's; the lining starts stress-free);
+                # a wall installed in ground that stays releases nothing
+                gone = np.flatnonzero((prev_mat >= 0) & (mat != prev_mat) & ((self.removed_at <= k) | (mat < 0)))
                 loads.append(self._removal_load(gone, prev_mat, st, u, uref) * np.real(release))
                 dl = np.zeros((n, nw))
                 for j, d in enumerate(dsts):
@@ -380,6 +416,17 @@ class ExcavationSimulation(Simulation):
                 dloads.append(dl)
             for name in step.install:
                 uref[name], duref[name] = u.copy(), du.copy()
+            new = self._installed == k
+            if new.any():  # props and anchors: jacked to their preload (the new ones not yet acting), then locked
+                before = self._springs_at(k - 1)
+                P = np.real(st["preloads"]) * new
+                g = -(self._C.T @ P)
+                dg = np.column_stack([-(self._C.T @ (d["preloads"] * new)) for d in dsts]) if nw else np.zeros((n, 0))
+                if np.any(g != 0) or np.any(dg != 0):
+                    self._solve_increment(mat, st, dsts, before, ks, g, dg, u, du)
+                e_ref[new] = self._C[new] @ u
+                if nw:
+                    de_ref[new] = self._C[new] @ du
             inc = frac[k] - (frac[k - 1] if k else 0.0)
             if np.any(inc != 0):
                 g = sum(inc[i] * loads[i] for i in range(len(loads)) if inc[i] != 0)
@@ -388,38 +435,49 @@ class ExcavationSimulation(Simulation):
                     dinc = d["fractions"][k] - (d["fractions"][k - 1] if k else 0.0)
                     for i in range(len(loads)):
                         dg[:, j] += inc[i] * dloads[i][:, j] + dinc[i] * loads[i]
-                coeffs = self._coeffs(mat, st)
-                act = self._active(mat)
-                fact, s = self._factor(k, mat, np.real(coeffs), act)
-                from geoback.physics.stiffness import counted_solve
-
-                step_u = counted_solve(self.counters, fact, s, g[act][:, None])[:, 0]
-                u[act] += step_u
-                if nw:
-                    rhs = dg[act].copy()
-                    full_step = np.zeros(n)
-                    full_step[act] = step_u
-                    real = np.real(coeffs)
-                    for j, d in enumerate(dsts):
-                        dc = self._coeffs(mat, d)
-                        if not np.any(dc):
-                            continue
-                        alpha = proportion(dc, real)
-                        if alpha is not None:  # dK = alpha K (a modulus scaling the whole configuration): dK du = alpha g
-                            rhs[:, j] -= alpha * g[act]
-                        else:
-                            dK = fe.matrix(dc)[act][:, act]
-                            rhs[:, j] -= FEModel.symmetric_product(dK.tocsr(), step_u)
-                    du[act] += counted_solve(self.counters, fact, s, rhs)
-            elif nw:
-                pass
+                self._solve_increment(mat, st, dsts, self._springs_at(k), ks, g, dg, u, du)
             U[k] = u
             if nw:
                 dU[k] = du
             prev_mat = mat
-        run = _Run(key, U, dU, wrt)
+        run = _Run(key, U, dU, wrt, e_ref, de_ref)
         self._memo["run"] = run
         return run
+
+    def _solve_increment(self, mat, st, dsts, on, ks, g, dg, u, du) -> None:
+        """u += K^-1 g on the configuration's active dofs (elements `mat`, connectors `on`), and with it
+        du += K^-1 (dg - dK du_step) (eqn 34): in place."""
+        from geoback.physics.stiffness import counted_solve
+
+        fe = self.fe
+        coeffs = self._coeffs(mat, st)
+        act = self._active(mat)
+        real = np.real(coeffs)
+        fact, s = self._factor(0, mat, real, act, on, ks)
+        step_u = counted_solve(self.counters, fact, s, g[act][:, None])[:, 0]
+        u[act] += step_u
+        if not len(dsts):
+            return
+        rhs = dg[act].copy()
+        full_step = np.zeros(fe.nfree)
+        full_step[act] = step_u
+        e_step = self._C[on] @ full_step if on.any() else np.zeros(0)
+        ref = np.concatenate([real.ravel(), ks[on]])
+        for j, d in enumerate(dsts):
+            dc = self._coeffs(mat, d)
+            dk = np.asarray(d["springs"])[on]
+            if not (np.any(dc) or np.any(dk)):
+                continue
+            alpha = proportion(np.concatenate([dc.ravel(), dk]), ref)
+            if alpha is not None:  # dK = alpha K (a modulus scaling the whole configuration): dK du = alpha g
+                rhs[:, j] -= alpha * g[act]
+                continue
+            if np.any(dc):
+                dK = fe.matrix(dc)[act][:, act]
+                rhs[:, j] -= FEModel.symmetric_product(dK.tocsr(), step_u)
+            if np.any(dk):
+                rhs[:, j] -= (self._C[on].T @ (dk * e_step))[act]
+        du[act] += counted_solve(self.counters, fact, s, rhs)
 
     # ------------------------------------------------------------------ the interface
     def stage_displacements(self, values: Mapping) -> np.ndarray:
@@ -440,7 +498,36 @@ class ExcavationSimulation(Simulation):
             if wrt:
                 cols = [run.wrt.index(n) for n in wrt]
                 A[rows] = Pk @ run.du[k][:, cols]
+        r0 = 0
+        for b in self.survey.blocks:  # load cells: the force of their prop or anchor (per prop)
+            if b.kind == "load_cell":
+                name = self.loaded.case.instruments[b.index].support
+                k = list(self.stages).index(b.stage)
+                f, df = self.connector_force(values, name, k, run, wrt)
+                scale = self.connectors[name].per_support()
+                x[r0:r0 + b.m] = scale * f
+                if wrt:
+                    A[r0:r0 + b.m] = scale * df
+            r0 += b.m
         return Prediction(x, A)
+
+    def connector_force(self, values: Mapping, name: str, k: int, run=None, wrt: Seq[str] = ()):
+        """Axial force per metre run N of a prop (compression) or anchor (tension) after stage k
+        (``case/supports.py``: N = P + k (e - e_installed); 0 before it is installed), and dN/d(wrt)."""
+        run = run or self._run(values, tuple(wrt))
+        i = list(self.connectors).index(name)
+        if self._installed[i] > k:
+            return 0.0, np.zeros(len(wrt))
+        c = self._C[i]
+        e = float((c @ run.u[k])[0]) - run.e_ref[i]
+        stiff, pre = float(np.real(values[f"k[{name}]"])), float(np.real(values[f"preload[{name}]"]))
+        N = pre + stiff * e
+        dN = np.zeros(len(wrt))
+        for j, n in enumerate(wrt):
+            col = run.wrt.index(n)
+            dN[j] = stiff * (float((c @ run.du[k][:, col])[0]) - run.de_ref[i, col])
+            dN[j] += (n == f"preload[{name}]") + (n == f"k[{name}]") * e
+        return N, dN
 
     def element_stress(self, values: Mapping, k: int | None = None) -> np.ndarray:
         """Mean total stress (sxx, syy, sxy) per element after stage k (default the last); NaN where
@@ -470,6 +557,60 @@ class ExcavationSimulation(Simulation):
                                              d33 * ref[:, 2]])[sel]
         out[mat < 0] = np.nan
         return out
+
+    # ------------------------------------------------------------------ walls and supports
+    def wall_forces(self, values: Mapping, run=None):
+        """Every wall's deflection, shear and bending moment after every stage (``supports.WallForces``),
+        integrated across the wall from its stress (its increment since installation: the geostatic
+        stress it was installed with bends nothing); None without walls."""
+        from geoback.physics.supports import WallForces, section_forces
+
+        if not self.plan.walls:
+            return None
+        run = run or self._run(values, ())
+        out = {}
+        for name, band in self.plan.walls.items():
+            depths = self._wall_depths(band)
+            ops = self._memo.setdefault("wall_ops", {})
+            if name not in ops:
+                ops[name] = self._section_strain(band, depths)
+            E, nu = float(np.real(values[f"E[{name}]"])), float(np.real(values[f"nu[{name}]"]))
+            d11, d22, d12, d33 = plane_strain_isotropic(E, nu)
+            k_in = self.plan.installed_at(name)
+            Ix, ex, ey, gx = ops[name]
+            M, V, ux = [], [], []
+            for k in range(len(self.stages)):
+                if k < k_in:
+                    M.append(np.full(len(depths), np.nan)), V.append(np.full(len(depths), np.nan))
+                    ux.append(np.full(len(depths), np.nan))
+                    continue
+                u = run.u[k] - (run.u[k_in - 1] if k_in > 0 else 0.0)
+                e1, e2, e3 = ex @ u, ey @ u, gx @ u
+
+                def stress(_pts, e1=e1, e2=e2, e3=e3):
+                    return np.column_stack([d11 * e1 + d12 * e2, d12 * e1 + d22 * e2, d33 * e3])
+
+                f = section_forces(band, depths, stress)
+                V.append(f[:, 1]), M.append(f[:, 2]), ux.append(Ix @ run.u[k])
+            out[name] = WallForces(name, depths, tuple(self.stages), np.array(ux), np.array(V), np.array(M))
+        return out
+
+    @staticmethod
+    def _wall_depths(band) -> np.ndarray:
+        length = band.toe - band.top
+        n = max(41, int(math.ceil(length / 0.1)) + 1)
+        eps = 1e-6 * length
+        return np.linspace(band.top + eps, band.toe - eps, n)
+
+    def _section_strain(self, band, depths):
+        """Operators at the Gauss points across the wall at `depths`: u_x on the centreline, and the
+        strains exx, eyy, gxy (``supports.section_points`` order)."""
+        from geoback.physics.supports import section_points
+
+        pts = section_points(band, depths)
+        Dx, Dy = self.fe.interpolation(pts, derivative=0), self.fe.interpolation(pts, derivative=1)
+        Ix, _ = self.fe.interpolation(np.column_stack([np.full(len(depths), band.x), -depths]))
+        return Ix, Dx[0], Dy[1], (Dy[0] + Dx[1]).tocsr()
 
     def field(self, values: Mapping) -> Field:
         run = self._run(values, ())

@@ -22,7 +22,7 @@ from geoback.case.schema import Case
 from geoback.physics.mesh import Mesh, cache_dir, compact, generate, gmsh_version, graded_fields, notice
 
 GMSH_CALLS = 0
-MESHER_VERSION = 5  # part of the cache key: raised when the meshing changes
+MESHER_VERSION = 6  # part of the cache key: raised when the meshing changes
 
 
 @dataclass(frozen=True)
@@ -51,7 +51,9 @@ def section_inputs(case: Case, instrument_points=()) -> dict:
     g, m = case.geometry, case.mesh
     wall, far = default_sizes(case)
     linings = Sequence.of(case).linings if case.construction is not None else {}
-    return {"kind": "section", "mesher": MESHER_VERSION, "model": g.model, "box": list(lay.box(g)),
+    from geoback.case.supports import walls
+
+    return {"kind": "section", "walls": [[w.name, w.x, w.top, w.toe, w.thickness, w.layers] for w in walls(case).values()], "mesher": MESHER_VERSION, "model": g.model, "box": list(lay.box(g)),
             "tops": [layer.top for layer in case.ground.layers], "names": [layer.name for layer in case.ground.layers],
             "openings": [op.model_dump(mode="json") for op in g.openings],
             "linings": [ln.model_dump(mode="json") for ln in linings.values()],
@@ -134,9 +136,12 @@ def _run_gmsh(case: Case, inputs: dict, key: str) -> SectionMesh:
     linings = inputs["linings"]
     from geoback.case.sequence import Sequence
 
+    from geoback.case.supports import walls
+
     placed = list(Sequence.of(case).linings.values()) if case.construction is not None else []
-    bands = [lay.lining_band(g, ln) for ln in placed]
-    band_names = tuple(ln.name for ln in placed)
+    wall_bands = list(walls(case).values())
+    bands = [lay.lining_band(g, ln) for ln in placed] + [w.polygon() for w in wall_bands]
+    band_names = tuple(ln.name for ln in placed) + tuple(w.name for w in wall_bands)
     gmsh.initialize(readConfigFiles=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
@@ -187,6 +192,10 @@ def _run_gmsh(case: Case, inputs: dict, key: str) -> SectionMesh:
                 band, _ = occ.intersect(band, holder if isinstance(holder, list) else [(2, holder)])
             band_inputs.append([len(surfaces) + j for j, s in enumerate(band) if s[0] == 2])
             surfaces += [s for s in band if s[0] == 2]
+        for w in wall_bands:  # a wall: its band, fragmented with the ground below
+            fx0, fx1 = w.faces
+            band_inputs.append([len(surfaces)])
+            surfaces.append((2, occ.addRectangle(fx0, -w.toe, 0, fx1 - fx0, w.toe - w.top)))
         _, fragments = occ.fragment(surfaces, [])
         occ.synchronize()
         outside = []
@@ -198,16 +207,17 @@ def _run_gmsh(case: Case, inputs: dict, key: str) -> SectionMesh:
             occ.remove(outside, recursive=True)
             occ.synchronize()
         f = gmsh.model.mesh.field
-        background = graded_fields(gmsh, _wall_curves(g, gmsh), inputs["size_wall"], inputs["size_far"],
+        background = graded_fields(gmsh, _wall_curves(g, gmsh, [w.polygon() for w in wall_bands]), inputs["size_wall"], inputs["size_far"],
                                    inputs["growth"], inputs["points"], inputs["size_instruments"])
         surf_tags = [t for _, t in gmsh.model.getEntities(2)]
         alive = set(surf_tags)
         band_surfaces = [sorted({t for i in idx for d, t in fragments[i] if d == 2 and t in alive}) for idx in band_inputs]
-        for n, (ln, tags) in enumerate(zip(placed, band_surfaces)):
+        through = [ln.thickness / 2 for ln in placed] + [w.thickness / w.layers for w in wall_bands]
+        for n, (size, tags) in enumerate(zip(through, band_surfaces)):
             if tags:
                 fid = 20 + n
                 f.add("Constant", fid)
-                f.setNumber(fid, "VIn", min(inputs["size_wall"], ln.thickness / 2))
+                f.setNumber(fid, "VIn", min(inputs["size_wall"], size))
                 f.setNumber(fid, "VOut", 1e22)
                 f.setNumbers(fid, "SurfacesList", tags)
                 background.append(fid)
@@ -258,12 +268,12 @@ def _half_plane(occ, a, b, poly, side_of=None) -> int:
     return _polygon_surface(occ, [p0, p1, (p1[0] + size * nx, p1[1] + size * ny), (p0[0] + size * nx, p0[1] + size * ny)])
 
 
-def _wall_curves(g, gmsh) -> list[int]:
-    """Curves on the openings' walls and cut lines (where the mesh is refined): curves whose midpoint lies
-    within the openings' closed outlines."""
+def _wall_curves(g, gmsh, retaining=()) -> list[int]:
+    """Curves on the openings' walls and cut lines and on the retaining walls (where the mesh is refined):
+    curves whose midpoint lies within the openings' closed outlines or on a retaining wall."""
     from shapely.geometry import Point
 
-    polys = [lay.polygon(op).buffer(1e-6 * max(g.width, g.depth)) for op in g.openings]
+    polys = [p.buffer(1e-6 * max(g.width, g.depth)) for p in [lay.polygon(op) for op in g.openings] + list(retaining)]
     out = []
     for _, tag in gmsh.model.getEntities(1):
         lo, hi = gmsh.model.getParametrizationBounds(1, tag)
