@@ -546,15 +546,21 @@ class ExcavationSimulation(Simulation):
         sv = -self._overburden(depth, gammas, float)
         own = {k: v for k, v in values.items() if not (self.plan.knows(k) or self.weights.knows(k))}
         k0 = np.real(self.ground.fields(own, depth, fe.region).k0)
-        ground = mat == 0
+        walls = np.isin(mat, [1 + i for i, n in enumerate(self.mesh.band_names) if n in (self.plan.walls or {})])
+        ground = (mat == 0) | walls  # a wall keeps the ground stress it was installed in
         out[ground] += np.column_stack([k0 * sv, sv, np.zeros_like(sv)])[ground]
-        for i, n in enumerate(self.mesh.band_names):  # a lining's stress from its installation on
+        ground_D = np.real(st["coeffs"]).T
+        for i, n in enumerate(self.mesh.band_names):  # a band's stress from its installation on
             sel = mat == 1 + i
             if sel.any():
-                k_in = next(j for j, s in enumerate(self.plan.steps) if n in s.install)
-                ref = fe.element_strain(fe.expand(run.u[k_in - 1] if k_in else np.zeros(fe.nfree)))
+                k_in = self.plan.installed_at(n)
+                ref = fe.element_strain(fe.expand(run.u[k_in - 1] if k_in > 0 else np.zeros(fe.nfree)))
                 out[sel] -= np.column_stack([d11 * ref[:, 0] + d12 * ref[:, 1], d12 * ref[:, 0] + d22 * ref[:, 1],
                                              d33 * ref[:, 2]])[sel]
+                if n in (self.plan.walls or {}):  # plus what the ground there had taken until then
+                    g11, g22, g12, g33 = ground_D
+                    out[sel] += np.column_stack([g11 * ref[:, 0] + g12 * ref[:, 1], g12 * ref[:, 0] + g22 * ref[:, 1],
+                                                 g33 * ref[:, 2]])[sel]
         out[mat < 0] = np.nan
         return out
 
