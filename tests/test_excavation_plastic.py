@@ -288,6 +288,7 @@ def _check_sensitivities(sim, names, steps, richardson=False, tol=1e-6):
         assert scale > 0, name
         found[name] = (float(np.abs(col - A[:, j]).max() / scale), step)
     print({k: f"{d:.1e} (step {h:g})" for k, (d, h) in found.items()})
+    assert all(np.isfinite(d) for d, _ in found.values()), found  # (a value at 0 has no relative step)
     assert max(d for d, _ in found.values()) <= tol, found
     return found
 

@@ -87,6 +87,7 @@ class InstrumentBlock:
     measured: np.ndarray | None = None  # linewise: the direction each reading measures (eqns 11, 15, 18)
     reference_end: str = ""  # linewise, in words: 'toe' or 'head' (inclinometer), 'reference end' (others)
     kept: tuple | None = None  # rows of the whole instrument this block reads (None: all; ``without``)
+    support: str | None = None  # a load cell: the prop or anchor whose force it reads
 
     @property
     def m(self) -> int:
@@ -201,7 +202,7 @@ def build_block(ins, loaded: LoadedCase, index: int) -> InstrumentBlock:
         head = np.array([connectors(loaded.case)[ins.support].head], float)
         labels = [Reading(ins.name, kind, 1, "N", *head[0])]
         return InstrumentBlock(ins.name, kind, index, head, np.zeros((1, 1, 2)), labels, np.eye(1) * ins.sigma ** 2,
-                               np.zeros((1, 0)), [], sigma=ins.sigma)
+                               np.zeros((1, 0)), [], sigma=ins.sigma, support=ins.support)
     if kind == "convergence":
         a, b = np.asarray(ins.points[0], float), np.asarray(ins.points[1], float)
         if np.linalg.norm(b - a) == 0:

@@ -483,6 +483,10 @@ class ExcavationSimulation(Simulation):
     def stage_displacements(self, values: Mapping) -> np.ndarray:
         return self._run(values, ()).u
 
+    def _solution(self, values: Mapping, wrt: tuple):
+        """The forward run (u, du per stage, the connectors' locked e) whatever the ground."""
+        return self._run(values, wrt)
+
     def _readings(self, values: Mapping, wrt: Seq[str]) -> Prediction:
         run = self._run(values, tuple(wrt))
         P = self.survey.P
@@ -498,23 +502,27 @@ class ExcavationSimulation(Simulation):
             if wrt:
                 cols = [run.wrt.index(n) for n in wrt]
                 A[rows] = Pk @ run.du[k][:, cols]
+        self._load_cells(values, wrt, run, x, A)
+        return Prediction(x, A)
+
+    def _load_cells(self, values: Mapping, wrt, run, x: np.ndarray, A: np.ndarray | None) -> None:
+        """The rows of the load cells: the force of their prop or anchor (per prop), in place."""
         r0 = 0
-        for b in self.survey.blocks:  # load cells: the force of their prop or anchor (per prop)
+        for b in self.survey.blocks:
             if b.kind == "load_cell":
-                name = self.loaded.case.instruments[b.index].support
+                name = b.support
                 k = list(self.stages).index(b.stage)
                 f, df = self.connector_force(values, name, k, run, wrt)
                 scale = self.connectors[name].per_support()
                 x[r0:r0 + b.m] = scale * f
-                if wrt:
+                if A is not None and len(wrt):
                     A[r0:r0 + b.m] = scale * df
             r0 += b.m
-        return Prediction(x, A)
 
     def connector_force(self, values: Mapping, name: str, k: int, run=None, wrt: Seq[str] = ()):
         """Axial force per metre run N of a prop (compression) or anchor (tension) after stage k
         (``case/supports.py``: N = P + k (e - e_installed); 0 before it is installed), and dN/d(wrt)."""
-        run = run or self._run(values, tuple(wrt))
+        run = run or self._solution(values, tuple(wrt))
         i = list(self.connectors).index(name)
         if self._installed[i] > k:
             return 0.0, np.zeros(len(wrt))

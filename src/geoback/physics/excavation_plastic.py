@@ -82,6 +82,7 @@ from dataclasses import dataclass, replace
 from typing import Mapping, Sequence as Seq
 
 import numpy as np
+import scipy.sparse as sp
 
 from geoback.case.strength import ELASTIC, INCREMENTS, Strength, stage_increments
 from geoback.errors import ForwardFailure, GeobackError
@@ -96,6 +97,9 @@ from geoback.physics.simulation import Field, Prediction
 REPLAY_TOL, REPLAY_FLOOR = 1e-13, 1e-11  # a replay's Newton tolerance (plastic.py's) and where a residual that no
 # longer falls is taken as converged: the rounding floor of the residual here is 5e-14 to 1.3e-12 from stage to stage
 # (linings raising it), above 1e-13 at times
+LINED_CONTRAST = 125.0  # the stiffness contrast (a lining's E over the ground's) REPLAY_FLOOR was measured at
+PRELOAD_INCREMENTS = 2  # increments of a support's preload (the jack), before it locks
+PROBE = 1e-9  # a zero preload's derivative: the one-sided one, by a jack of this share of the load released
 LINING_STRENGTH = (ELASTIC["c"], ELASTIC["phi"] * DEG, ELASTIC["psi"] * DEG, ELASTIC["tension"])  # never reached
 
 
@@ -180,6 +184,12 @@ class _Run:
     branch: tuple = ()  # per stage, the yielding points after each increment: a run on the same branch as another
     # (the same points yield in the same increments) has the same counts, and finite differences between
     # such runs converge to the sensitivities (across a change of branch they pick up a kink)
+    e_ref: np.ndarray = None  # each prop's or anchor's shortening / elongation when it was locked
+    de_ref: np.ndarray = None
+
+    @property
+    def wrt(self) -> tuple:
+        return self.names
 
 
 class YieldingExcavationSimulation(ExcavationSimulation):
@@ -225,8 +235,11 @@ class YieldingExcavationSimulation(ExcavationSimulation):
         tolerance, from scratch: its readings near `values` are the discrete function whose exact
         derivatives the sensitivities at `values` are."""
         fd = copy.copy(self)
+        inp = self._inputs({k: np.real(v) for k, v in values.items()}).real()
+        stiffest = max([float(E) for E, _ in inp.linings.values()] + [float(inp.E.max())])
+        contrast = stiffest / float(inp.E.min())  # the residual's rounding floor grows with it (a wall: 1500)
         fd.options = replace(self.options, schedule=self.solution(values).schedule, refine=False, tol=REPLAY_TOL,
-                             floor=REPLAY_FLOOR)
+                             floor=REPLAY_FLOOR * max(1.0, contrast / LINED_CONTRAST))
         fd.release()
         return fd
 
@@ -235,7 +248,9 @@ class YieldingExcavationSimulation(ExcavationSimulation):
         the stage releases of any group, at least MIN_STAGE (``strength.stage_increments``)."""
         frac = np.real(self.plan.fractions(self.plan.values))
         steps = np.diff(np.vstack([np.zeros((1, frac.shape[1])), frac]), axis=0).max(axis=1, initial=0.0)
-        return tuple(tuple(np.linspace(0.0, 1.0, n + 1)[1:]) for n in stage_increments(steps, increments))
+        release = tuple(tuple(np.linspace(0.0, 1.0, n + 1)[1:]) for n in stage_increments(steps, increments))
+        jacked = sorted(set(int(k) for k in self._installed))  # a preload sub-step in each stage installing supports
+        return release + tuple(tuple(np.linspace(0.0, 1.0, PRELOAD_INCREMENTS + 1)[1:]) for _ in jacked)
 
     # ------------------------------------------------------------------ the inputs of the engine
     def _inputs(self, values: Mapping) -> _Inputs:
@@ -253,7 +268,8 @@ class YieldingExcavationSimulation(ExcavationSimulation):
         layer_fields = [self.strength.fields(values, name) for name in self.ground.layers]
         per = np.array([[np.nan if v is None else v for v in lf] for lf in layer_fields], dtype=dtype)
         strength = per[self.fe.region]  # (ne, 4): c, phi, psi, tension
-        linings = {n: (values[f"E[{n}]"], values[f"nu[{n}]"]) for n in self.plan.linings}
+        linings = {n: (values[f"E[{n}]"], values[f"nu[{n}]"]) for n in self.plan.bands}  # linings' and walls'
+
         return _Inputs(pts.E * np.ones(self.fe.ne), pts.nu * np.ones(self.fe.ne), strength[:, 0], strength[:, 1] * DEG,
                        strength[:, 2] * DEG, strength[:, 3], linings, sigma0,
                        np.array(gammas, dtype=dtype)[self.fe.region], pts.release, self.plan.fractions(values))
@@ -330,6 +346,9 @@ class YieldingExcavationSimulation(ExcavationSimulation):
             raise ForwardFailure(f"the in-situ stress exceeds the Mohr-Coulomb strength at these values at "
                                  f"{int(outside.sum())} of {self.ops.npts} points (layer {', '.join(layers)})")
 
+    def _solution(self, values: Mapping, wrt: tuple):
+        return self.solution(values, wrt)
+
     def solution(self, values: Mapping, wrt: Seq[str] = ()) -> _Run:
         """The staged elastoplastic solution at `values` with du/dv for `wrt` (the last ones reused:
         ``plastic.Runs.answer``)."""
@@ -362,11 +381,83 @@ class YieldingExcavationSimulation(ExcavationSimulation):
         watch = Watch(self._runs.number, self.stages)
         totals = EngineCounters()  # the engine's, summed over the stages
         prev = self._material(-1)
+        C_all = self._C
+        ks = np.array([float(np.real(values[f"k[{m}]"])) for m in self.connectors])
+        preload = np.array([float(np.real(values[f"preload[{m}]"])) for m in self.connectors])
+        dks = np.array([[float(nm == f"k[{m}]") for nm in names] for m in self.connectors]).reshape(len(ks), P)
+        dpre = np.array([[float(nm == f"preload[{m}]") for nm in names] for m in self.connectors]).reshape(len(ks), P)
+        e_ref, de_ref = np.zeros(len(ks)), np.zeros((len(ks), P))
+        jacked = sorted(set(int(j) for j in self._installed))
+        state = dict(u=u, du=du, sigma=sigma, dsigma=dsigma, yielded=yielded)
+
+        def engine(k, key, mat, g, dgs, before, on, plastic_now, forward=True):
+            """One engine run on stage k's body (elements `mat`, springs `on`): release g (dg/dp `dgs`)
+            from the state so far, in the increments of `schedule[key]`; updates the state in place (with
+            `forward` False only the sensitivities: g is then a vanishing probe of the direction)."""
+            active, dofs, ops_k = self._configuration(mat)
+            pts = self._points(active)
+            springs = None
+            if on.any():
+                from geoback.physics.supports import spring_matrix
+
+                Ku = spring_matrix(C_all[on], ks[on], dofs)
+                springs = (Ku + sp.triu(Ku, 1).T).tocsr()
+            derivs = None
+            if P:
+                derivs = []
+                for j, (name, d) in enumerate(zip(names, dinp)):
+                    dm = self._configured(d, mat, active, derivative=True)
+                    dK = None
+                    if on.any() and np.any(dks[on, j]):
+                        Kd = spring_matrix(C_all[on], dks[on, j], dofs)
+                        dK = (Kd + sp.triu(Kd, 1).T).tocsr()
+                    derivs.append(ParameterDerivative(name, *dm.values(), sigma0=state["dsigma"][pts, :, j],
+                                                      f=dgs[:, j][dofs], stages=0.0, springs=dK))
+            material = self._configured(inp, mat, active)
+
+            def observer(p, _k=k):
+                watch(replace(p, stage=_k + 1, stages=ns))
+
+            try:
+                with one_thread(self._pardiso):
+                    res = solve(fe, material, state["sigma"][pts], g[dofs], [1.0], derivatives=derivs,
+                                options=replace(self.options, schedule=(schedule[key],)), operators=ops_k,
+                                warm=warm.get(key), observer=observer, f_before=before[dofs], springs=springs)
+            except NonConvergence as exc:
+                self._count(exc.counters)
+                _add(totals, exc.counters)
+                watch.done(totals, failed=True)
+                what = "the preload of its supports" if key != k else "the stage's release"
+                exc.args = (f"construction stage '{plan.steps[k].name}' ({k + 1} of {ns}), {what}: "
+                            + str(exc).replace("(stage 1, lambda", "(fraction of the stage's release"),)
+                raise
+            except ValueError as exc:  # the start stress outside the strength
+                if "yield condition" in str(exc):
+                    raise ForwardFailure(f"construction stage '{plan.steps[k].name}': the stress exceeds the "
+                                         f"Mohr-Coulomb strength at these values ({exc})") from None
+                raise
+            self._count(res.counters)
+            _add(totals, res.counters)
+            if P:
+                state["du"][dofs] += res.du_dp[0]
+                state["dsigma"][pts] = res.dsigma
+            if not forward:
+                return ()
+            state["u"][dofs] += res.u[0]
+            state["sigma"][pts] = res.sigma[0].reshape(-1, 4)
+            state["yielded"][pts] |= res.yielded[0].reshape(-1)
+            plastic_now[pts] = res.plastic[0].reshape(-1)
+            schedule[key] = res.schedule[0]
+            new_warm[key] = res.warm
+            return tuple(log.plastic_points for log in res.increments if log.converged)
+
         for k, step in enumerate(plan.steps):
             mat = self._material(k)
             plastic_now = np.zeros(ops.npts, bool)
+            sigma, dsigma = state["sigma"], state["dsigma"]
             if step.excavate or step.remove:  # (R1) and its derivative (R3)
-                gone = np.flatnonzero((prev >= 0) & (mat != prev))  # removed, or ground a lining replaces
+                # removed, or ground a lining replaces (a wall installed in ground that stays removes nothing)
+                gone = np.flatnonzero((prev >= 0) & (mat != prev) & ((self.removed_at <= k) | (mat < 0)))
                 f = self._internal_force(gone, sigma) + self._weight(gone, prev, inp.gamma)
                 loads.append(inp.release * f)
                 dl = np.zeros((n, P))
@@ -375,74 +466,48 @@ class YieldingExcavationSimulation(ExcavationSimulation):
                     for j, d in enumerate(dinp):
                         dl[:, j] += inp.release * self._weight(gone, prev, d.gamma) + d.release * f
                 dloads.append(dl)
-            started = np.flatnonzero((mat > 0) & (prev != mat))  # linings installed: stress-free
-            if len(started):
+            walls = [1 + i for i, m in enumerate(self.mesh.band_names) if m in (plan.walls or {})]
+            started = np.flatnonzero((mat > 0) & (prev != mat) & ~np.isin(mat, walls))  # linings: stress-free
+            if len(started):  # (a wall installed keeps the ground's stress)
                 pts = self._points(started)
                 sigma[pts] = 0.0
                 if P:
                     dsigma[pts] = 0.0
+            before = sum((frac[k - 1, i] * loads[i] for i in range(len(loads)) if k and frac[k - 1, i]), np.zeros(n))
+            new = self._installed == k
+            if new.any():  # props and anchors jacked to their preload, then locked (as in excavation.py)
+                g = -(C_all.T @ (preload * new))
+                dgs = -(C_all.T @ (dpre * new[:, None])) if P else np.zeros((n, 0))
+                key_k = len(plan.steps) + jacked.index(k)
+                if np.any(g):
+                    engine(k, key_k, mat, g, dgs, before, self._installed < k, plastic_now)
+                elif np.any(dgs):  # no preload, one identified: its derivative at 0 (a jack of vanishing load)
+                    probe = -(C_all.T @ new.astype(float)) * PROBE * max(1.0, float(np.abs(before).max()))
+                    engine(k, key_k, mat, probe, dgs, before, self._installed < k, plastic_now, forward=False)
+                e_ref[new] = C_all[new] @ state["u"]
+                if P:
+                    de_ref[new] = C_all[new] @ state["du"]
             inc = frac[k] - (frac[k - 1] if k else 0.0)
             g = sum((inc[i] * loads[i] for i in range(len(loads)) if inc[i] != 0), np.zeros(n))
-            before = sum((frac[k - 1, i] * loads[i] for i in range(len(loads)) if k and frac[k - 1, i]), np.zeros(n))
             if np.any(inc != 0) and np.any(g):
-                active, dofs, ops_k = self._configuration(mat)
-                pts = self._points(active)
-                derivs = None
-                if P:
-                    derivs = []
-                    for j, (name, d) in enumerate(zip(names, dinp)):
-                        dinc = d.fractions[k] - (d.fractions[k - 1] if k else 0.0)
-                        dg = sum((inc[i] * dloads[i][:, j] + dinc[i] * loads[i] for i in range(len(loads))),
-                                 np.zeros(n))
-                        dm = self._configured(d, mat, active, derivative=True)
-                        derivs.append(ParameterDerivative(name, *dm.values(), sigma0=dsigma[pts, :, j],
-                                                          f=dg[dofs], stages=0.0))
-                material = self._configured(inp, mat, active)
-
-                def observer(p, _k=k):
-                    watch(replace(p, stage=_k + 1, stages=ns))
-
-                try:
-                    with one_thread(self._pardiso):
-                        res = solve(fe, material, sigma[pts], g[dofs], [1.0], derivatives=derivs,
-                                    options=replace(self.options, schedule=(schedule[k],)), operators=ops_k,
-                                    warm=warm.get(k), observer=observer, f_before=before[dofs])
-                except NonConvergence as exc:
-                    self._count(exc.counters)
-                    _add(totals, exc.counters)
-                    watch.done(totals, failed=True)
-                    exc.args = (f"construction stage '{step.name}' ({k + 1} of {ns}): "
-                                + str(exc).replace("(stage 1, lambda", "(fraction of the stage's release"),)
-                    raise
-                except ValueError as exc:  # the start stress outside the strength
-                    if "yield condition" in str(exc):
-                        raise ForwardFailure(f"construction stage '{step.name}': the stress exceeds the "
-                                             f"Mohr-Coulomb strength at these values ({exc})") from None
-                    raise
-                self._count(res.counters)
-                _add(totals, res.counters)
-                u[dofs] += res.u[0]
-                sigma[pts] = res.sigma[0].reshape(-1, 4)
-                yielded[pts] |= res.yielded[0].reshape(-1)
-                plastic_now[pts] = res.plastic[0].reshape(-1)
-                if P:
-                    du[dofs] += res.du_dp[0]
-                    dsigma[pts] = res.dsigma
-                schedule[k] = res.schedule[0]
-                new_warm[k] = res.warm
-                branch[k] = tuple(log.plastic_points for log in res.increments if log.converged)
+                dgs = np.zeros((n, P))
+                for j, d in enumerate(dinp):
+                    dinc = d.fractions[k] - (d.fractions[k - 1] if k else 0.0)
+                    dgs[:, j] = sum((inc[i] * dloads[i][:, j] + dinc[i] * loads[i] for i in range(len(loads))),
+                                    np.zeros(n))
+                branch[k] = engine(k, k, mat, g, dgs, before, self._installed <= k, plastic_now)
             here = np.repeat(mat == 0, ops.nq)  # ground present at the stage
-            out["u"][k] = u
-            out["sigma"][k] = sigma
-            out["yielded"][k] = yielded & here
+            out["u"][k] = state["u"]
+            out["sigma"][k] = state["sigma"]
+            out["yielded"][k] = state["yielded"] & here
             out["plastic"][k] = plastic_now & here
             if P:
-                out["du"][k] = du
+                out["du"][k] = state["du"]
             prev = mat
         watch.done(totals)
         self._runs.warm = new_warm
         return _Run(key, tuple(names), out["u"], out["du"], out["sigma"], out["yielded"], out["plastic"],
-                    tuple(schedule), totals, tuple(branch))
+                    tuple(schedule), totals, tuple(branch), e_ref, de_ref)
 
     def _count(self, c) -> None:
         """Add an engine run's counters (plasticity.linear.Counters) to the simulation's."""
@@ -465,6 +530,7 @@ class YieldingExcavationSimulation(ExcavationSimulation):
         X = P @ run.u.T  # (m, nstages)
         x = X[np.arange(len(rows)), rows]
         if not wrt:
+            self._load_cells(values, wrt, run, x, None)
             return Prediction(x)
         A = np.empty((len(x), len(wrt)))
         cols = [run.names.index(n) for n in wrt]
@@ -472,6 +538,7 @@ class YieldingExcavationSimulation(ExcavationSimulation):
             sel = rows == k
             if sel.any():
                 A[sel] = P[sel] @ run.du[k][:, cols]
+        self._load_cells(values, wrt, run, x, A)
         return Prediction(x, A)
 
     def element_stress(self, values: Mapping, k: int | None = None) -> np.ndarray:

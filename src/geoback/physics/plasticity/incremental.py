@@ -166,6 +166,7 @@ class ParameterDerivative:
     sigma0: object = 0.0
     f: object = 0.0
     stages: object = 0.0
+    springs: object = None  # d K_s / dp (nfree x nfree, sparse) where ``solve(springs=...)`` depends on p
 
 
 @dataclass
@@ -225,6 +226,7 @@ class _Derivatives:
     sigma0: np.ndarray  # (npts, 4, P)
     f: np.ndarray  # (nfree, P)
     stages: np.ndarray  # (n_stages, P)
+    springs: list = None  # d K_s / dp per parameter (None: K_s does not depend on it)
 
 
 def _derivatives(derivs, ops, n_stages) -> _Derivatives | None:
@@ -249,7 +251,7 @@ def _derivatives(derivs, ops, n_stages) -> _Derivatives | None:
         if sj.ndim > 0 and sj.shape != (n_stages,):
             raise ValueError(f"dstages/d{d.name}: expected a scalar or {n_stages} values, found {sj.shape}")
         st[:, j] = sj
-    return _Derivatives([d.name for d in derivs], mats, s0, f, st)
+    return _Derivatives([d.name for d in derivs], mats, s0, f, st, [d.springs for d in derivs])
 
 
 # ---------------------------------------------------------------------------------- solver
@@ -280,18 +282,25 @@ class _Failed(Exception):
 
 
 class _Problem:
-    def __init__(self, ops, mat, sigma0, f, opts, counters, f_before=None):
+    def __init__(self, ops, mat, sigma0, f, opts, counters, f_before=None, springs=None):
         self.ops, self.mat, self.sigma0, self.f, self.opts, self.counters = ops, mat, sigma0, f, opts, counters
         self.f_norm = np.linalg.norm(f)
         self.f_before = f_before  # the load released before this run (only what (2) is measured against)
+        self.springs = springs  # K_s: linear springs between dofs (props, anchors), or None
         self._w = None  # K_e^-1 f and its strain, once asked (elastic_response)
         with counters.timed("assemble tangent"):
             self.Ke_elastic = ops.element_matrices(mc.elastic_matrix(mat))
-            self.K_elastic = ops.assemble(self.Ke_elastic)
+            self.K_ground = ops.assemble(self.Ke_elastic)
+            self.K_elastic = self._with_springs(self.K_ground)
 
-    def residual(self, sigma, lam):
+    def _with_springs(self, K):
+        return K if self.springs is None else (K + self.springs).tocsr()
+
+    def residual(self, sigma, lam, u):
+        """(2) with the springs' force K_s u (u: this run's displacement)."""
         with self.counters.timed("internal force"):
-            return self.ops.internal_force(sigma - self.sigma0) - lam * self.f
+            r = self.ops.internal_force(sigma - self.sigma0) - lam * self.f
+            return r if self.springs is None else r + self.springs @ u
 
     def tangent(self, C, mode):
         """Consistent tangent: the elastic stiffness, corrected on the elements with plastic points."""
@@ -300,7 +309,7 @@ class _Problem:
             if not len(plastic):
                 return self.K_elastic
             Ke = self.ops.element_matrices(C, plastic) - self.Ke_elastic[plastic]
-            return self.ops.assemble(Ke, plastic, base=self.K_elastic.data)
+            return self._with_springs(self.ops.assemble(Ke, plastic, base=self.K_ground.data))
 
     def elastic_response(self, elastic: LU) -> tuple[np.ndarray, np.ndarray]:
         """w = K_e^-1 f and its strain at every point (one back-substitution a run)."""
@@ -329,9 +338,10 @@ class _Problem:
             sigma, C, mode = mc.update_with_tangent(state.sigma, deps, self.mat)
         if np.any(mode != mc.ELASTIC):
             return None
-        rel = float(np.linalg.norm(self.residual(sigma, lam)) / self.reference(lam))
+        u = state.u + dlam * w
+        rel = float(np.linalg.norm(self.residual(sigma, lam, u)) / self.reference(lam))
         self.counters.elastic_steps += 1
-        return _Converged(state.u + dlam * w, sigma, deps, mode, C, [rel], False)
+        return _Converged(u, sigma, deps, mode, C, [rel], False)
 
     def newton(self, state: _State, lam: float, first: LU, work: LU, start: np.ndarray | None = None,
                observer=None) -> _Converged:
@@ -342,7 +352,7 @@ class _Problem:
         after every iteration."""
         ops, opts = self.ops, self.opts
         ref = self.reference(lam)
-        r = self.residual(state.sigma, lam)
+        r = self.residual(state.sigma, lam, state.u)
         u = state.u.copy()
         lu = first
         residuals = []
@@ -350,7 +360,7 @@ class _Problem:
             with self.counters.timed("return mapping and tangent"):
                 deps = ops.strain(start - state.u)
                 sigma, mode = mc.update(state.sigma, deps, self.mat)
-            r_start = self.residual(sigma, lam)
+            r_start = self.residual(sigma, lam, start)
             if np.linalg.norm(r_start) < np.linalg.norm(r):
                 self.counters.warm_starts += 1
                 u, r = start.copy(), r_start
@@ -367,7 +377,7 @@ class _Problem:
             with self.counters.timed("return mapping and tangent"):
                 deps = ops.strain(u - state.u)
                 sigma, C, mode = mc.update_with_tangent(state.sigma, deps, self.mat)
-            r = self.residual(sigma, lam)
+            r = self.residual(sigma, lam, u)
             rel = float(np.linalg.norm(r) / ref)
             residuals.append(rel)
             if observer is not None:
@@ -427,14 +437,17 @@ class Progress:
 
 def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = None,
           options: Options | None = None, operators: PointOperators | None = None,
-          warm: dict | None = None, observer=None, f_before: np.ndarray | None = None) -> Result:
+          warm: dict | None = None, observer=None, f_before: np.ndarray | None = None, springs=None) -> Result:
     """Release f in increments up to each of `stages`; see the module docstring. `f_before`: a load
     (nfree,) released before this run from a state of which sigma0 is the stress (a stage of a longer
     construction): the residual (2) is then measured against ||f_before + lambda f||. `warm`: the
     ``Result.warm`` of an earlier run at nearby values (same schedule): each increment's Newton
     iteration starts from that run's solution of it when its residual is smaller there.
     `observer(Progress)`: called after every Newton iteration and converged increment (progress
-    lines, a time limit: an exception it raises ends the run)."""
+    lines, a time limit: an exception it raises ends the run). `springs`: K_s (nfree x nfree, symmetric,
+    sparse), linear springs acting with the ground (props, anchors): (2) becomes
+    F(sigma - sigma_0) + K_s u = lambda f, the tangent K_t + K_s, and (4) gains -dK_s/dp u on its right
+    (``ParameterDerivative.springs``)."""
     opts = options or Options()
     ops = operators or PointOperators(fe)
     counters = Counters()
@@ -442,7 +455,9 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
     der = _derivatives(derivatives, ops, len(stages))
     if f_before is not None and np.shape(f_before) != (ops.nfree,):
         raise ValueError(f"f_before: expected shape ({ops.nfree},), found {np.shape(f_before)}")
-    problem = _Problem(ops, mat, sig0, f, opts, counters, f_before)
+    if springs is not None and np.shape(springs) != (ops.nfree, ops.nfree):
+        raise ValueError(f"springs: expected shape ({ops.nfree}, {ops.nfree}), found {np.shape(springs)}")
+    problem = _Problem(ops, mat, sig0, f, opts, counters, f_before, springs)
     state = _State(np.zeros(ops.nfree), sig0.copy(), 0.0)
     if der is not None:
         P = len(der.names)
@@ -553,6 +568,9 @@ def _sensitivities(problem: _Problem, der: _Derivatives, old: _State, new: _Stat
                 e[:, :, j] = mc.directional_derivative(old.sigma, res.deps, problem.mat, old.dsigma[:, :, j],
                                                        d_deps[:, :, j], der.material[j], res.mode)
             rhs = problem.f[:, None] * new.dlam[None, :] + new.lam * der.f - ops.internal_force(e - der.sigma0)
+            for j, dK in enumerate(der.springs or ()):
+                if dK is not None:
+                    rhs[:, j] -= dK @ new.u
         new.du = lu.solve(rhs)
         with timed("sensitivities: stress history"):
             new.dsigma = e + np.einsum("nij,njp->nip", res.C, ops.strain(new.du))

@@ -1,0 +1,58 @@
+"""Walls, props and anchors on Mohr-Coulomb ground (physics/excavation_plastic.py with the springs in the
+engine, plasticity/incremental.py): ground that never yields is the elastic model, sensitivities included;
+yielding ground's sensitivities against finite differences of the replayed schedule."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.test_walls import geoback_cache, pit, simulation  # noqa: F401 - the fixture is used by every test
+
+
+# ---------------------------------------------------------------------------- on mohr-coulomb ground
+def _mc(c=15.0, phi=24.0, **kw):
+    ins = [{"name": "I1", "kind": "inclinometer", "x": 10.4, "toe_depth": 24.0, "spacing": 2.0, "sigma": 1e-4,
+            "readings": {"level2": [0.0] * 12, "dig3": [0.0] * 12}},
+           {"name": "S1", "kind": "points", "points": [[12, 0], [16, 0], [24, 0]], "components": ["uy"],
+            "sigma": 1e-3, "readings": {"dig3": [0.0] * 3}},
+           {"name": "C1", "kind": "load_cell", "support": "P1", "sigma": 5.0, "readings": {"level2": [0.0],
+                                                                                          "dig3": [0.0]}},
+           {"name": "C2", "kind": "load_cell", "support": "P2", "sigma": 5.0, "readings": {"dig3": [0.0]}}]
+    layers = [{"name": "soft", "top": 0.0, "E": 20000.0, "nu": 0.3, "model": "mohr-coulomb", "c": c, "phi": phi, "psi": 0.0},
+              {"name": "stiff", "top": 10.0, "E": 80000.0, "nu": 0.3}]
+    return pit(layers=layers, instruments=ins, **kw)
+
+
+@pytest.mark.quick
+@pytest.mark.parametrize("kind", ["props", "anchors"])
+def test_mohr_coulomb_ground_that_never_yields_is_the_elastic_model(kind):
+    """c' huge: the walls, props (or anchors), their preloads and the load cells read as on elastic ground,
+    sensitivities included (the springs in the engine's residual, tangent and eqn (4))."""
+    sim = simulation(_mc(c=1e9, props=kind == "props", anchors=kind == "anchors", preload=120.0))
+    assert type(sim).__name__ == "YieldingExcavationSimulation"
+    data = _mc(props=kind == "props", anchors=kind == "anchors", preload=120.0)
+    data["ground"]["layers"][0] = {"name": "soft", "top": 0.0, "E": 20000.0, "nu": 0.3}
+    elastic = simulation(data, mesh=sim.mesh)
+    assert type(elastic).__name__ == "ExcavationSimulation"
+    names = ["E[W]", "k[P1]", "preload[P1]", "k[P2]", "preload[P2]", "E[soft]", "K0"]
+    v = sim.quantities()
+    a = sim.predict(v, names, sensitivities=True)
+    b = elastic.predict(elastic.quantities(), names, sensitivities=True)
+    assert not sim.solution(v).yielded.any()
+    assert np.abs(a.x - b.x).max() <= 1e-8 * np.abs(b.x).max()
+    for j, name in enumerate(names):
+        assert np.abs(a.A[:, j] - b.A[:, j]).max() <= 1e-7 * np.abs(b.A[:, j]).max(), name
+
+
+@pytest.mark.slow
+def test_mohr_coulomb_sensitivities_with_props_against_central_differences():
+    """Soft clay yielding behind the wall: the new values' DDM columns against finite differences of the
+    replayed schedule on the base run's branch (test_excavation_plastic's procedure)."""
+    from tests.test_excavation_plastic import _check_sensitivities
+
+    data = _mc(preload=120.0)
+    data["construction"]["props"][1]["preload"] = 40.0
+    sim = simulation(data)
+    assert sim.solution(sim.quantities()).yielded.any()
+    _check_sensitivities(sim, ["E[W]", "k[P1]", "preload[P1]", "k[P2]", "preload[P2]", "c[soft]", "phi[soft]"],
+                         steps=(1e-4, 1e-5, 1e-6))
