@@ -85,6 +85,23 @@ def test_openings(monkeypatch, capsys):
     assert "stages heading, heading-lined, bench, ring-closed" in out and "OUTSIDE" not in out
 
 
+def test_propped_excavation(monkeypatch, capsys):
+    """The propped excavation (truth E[soft] = 25 MPa, E[stiff] = 90 MPa, K0 = 0.9, k[P1] = 35 MN/m/m, readings
+    from a mesh twice as fine after the first four stages): every truth inside its 95 % interval, readings
+    consistent with their sigma, and the final lift's forecast bands hold what the truth then reads (the
+    wall's deflection at every station, the level-2 prop force)."""
+    ex, out = run_example("propped_excavation", monkeypatch, capsys)
+    result = ex["result"]
+    assert result.fit.status == "converged"
+    for p, true in ex["TRUTH"].items():
+        assert result[p].low < true < result[p].high, p
+    assert result.reliability.p_value > 0.05
+    assert ex["held"] == 1.0
+    fc, i = ex["fc"], ex["prop"]
+    assert fc.low[i] < ex["true_prop"] < fc.high[i]
+    assert "OUTSIDE" not in out
+
+
 def test_every_example_is_tested():
     tested = {name.removeprefix("test_") for name in globals() if name.startswith("test_")}
     assert {p.stem for p in EXAMPLES} <= tested

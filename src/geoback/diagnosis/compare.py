@@ -167,7 +167,9 @@ def detectable_lambda(k: int, level: float, power: float = POWER) -> float:
 SHORT = {"stiffness-gradient": "a modulus gradient", "layer-boundary": "a stratum with another modulus",
          "lining-stiffness": "a change of the lining's modulus", "release-before-lining": "another release before the lining",
          "anisotropy": "anisotropy", "K0-gradient": "a K0 gradient", "stress-release": "a partial stress release",
-         "integration-constant": "a reference-end movement", "bias-shift": "a bias shift", "depth-offset": "a depth offset"}
+         "integration-constant": "a reference-end movement", "bias-shift": "a bias shift", "depth-offset": "a depth offset",
+         "wall-stiffness": "a change of the wall's modulus", "support-stiffness": "a change of a support's stiffness",
+         "preload-lost": "another preload"}
 ABSURD = 10.0  # a detectable size this many times the parameter's usual range is "not detectable"
 
 

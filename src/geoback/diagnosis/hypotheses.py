@@ -221,6 +221,51 @@ def _section_linings(ctx: Context) -> list[Hypothesis]:
     return out
 
 
+def _walls(ctx: Context) -> list[Hypothesis]:
+    """With retaining walls: each wall's modulus E[wall] the fit does not identify, free (a cracked section:
+    E scales EI and EA together)."""
+    from geoback.case.sequence import Sequence
+
+    out = []
+    for name in Sequence.of(ctx.case).walls or {}:
+        E = f"E[{name}]"
+        if E in ctx.baseline or E not in ctx.values:
+            continue
+        Ew = float(ctx.values[E])
+        out.append(Hypothesis(
+            f"wall-stiffness[{name}]", "wall-stiffness", f"a stiffer or softer wall '{name}' than assumed",
+            f"The wall '{name}' bends more or less than its assumed E = {Ew:.4g} kPa gives (a cracked section, "
+            f"another thickness or panel joints: E scales its EI and EA together).",
+            [_param(E, Ew, Ew / 50, Ew * 5)]))
+    return out
+
+
+def _supports(ctx: Context, what: str) -> list[Hypothesis]:
+    """With props or anchors: each one's stiffness k[name] (what='stiffness') or its preload (what='preload',
+    where one is assumed) the fit does not identify, free."""
+    from geoback.case.sequence import Sequence
+
+    out = []
+    for name, cn in (Sequence.of(ctx.case).connectors or {}).items():
+        key = f"k[{name}]" if what == "stiffness" else f"preload[{name}]"
+        if key in ctx.baseline or key not in ctx.values:
+            continue
+        v = float(ctx.values[key])
+        if what == "stiffness":
+            out.append(Hypothesis(
+                f"support-stiffness[{name}]", "support-stiffness", f"{cn.kind} {name} stiffer or softer than designed",
+                f"The {cn.kind} '{name}' takes load at another stiffness than its assumed {v:.4g} kN/m per m run (a "
+                f"slack connection, shrinkage or creep of a slab, a waler that bends, a longer free length).",
+                [_param(key, v, v / 100, v * 10)]))
+        elif v > 0:
+            out.append(Hypothesis(
+                f"preload-lost[{name}]", "preload-lost", f"{cn.kind} {name}: preload not as assumed",
+                f"The {cn.kind} '{name}' was locked at another load than its assumed {v:.4g} kN/m per m run (preload "
+                f"lost at lock-off, a jack not fully pressed, relaxation).",
+                [_param(key, v, 0.0, 3 * v)]))
+    return out
+
+
 def tunnel_size(case) -> float:
     """The tunnel's radius, or with openings the smallest opening's equivalent radius (the radius of
     the circle of the same area): the length candidate depths and screens are spaced by."""
@@ -300,6 +345,11 @@ CATALOGUE: tuple[Kind, ...] = (
     Kind("release-before-lining", "more (or less) stress released before the lining than assumed", "ground",
          _release_before_lining),
     Kind("lining-stiffness", "a stiffer or softer lining than assumed", "ground", _lining_stiffness),
+    Kind("wall-stiffness", "a stiffer or softer retaining wall than assumed (a cracked section)", "ground", _walls),
+    Kind("support-stiffness", "a prop or anchor stiffer or softer than designed (a slack connection)", "ground",
+         lambda ctx: _supports(ctx, "stiffness")),
+    Kind("preload-lost", "a prop's preload or an anchor's lock-off load not as assumed", "ground",
+         lambda ctx: _supports(ctx, "preload")),
     Kind("yielding", "the ground yields around the tunnel (Mohr-Coulomb plastic zone)", "ground", None),
     Kind("bias-shift", "an inclinometer's readings carry a constant slope offset (error growing along the casing)",
          "instrument", _bias_shift),

@@ -106,9 +106,10 @@ def locate(misfit: Misfit, res: Fit, rel: Reliability, alpha: float = 0.05) -> l
             labs = block.labels[i0:i1 + 1]
             where = (f"reading{'s' if i1 > i0 else ''} {i0 + 1}{'-' + str(i1 + 1) if i1 > i0 else ''} "
                      f"({', '.join(sorted({lab.component for lab in labs}))})")
-            what = "displacement" if block.kind == "points" else "chord length change"
+            what = {"points": "displacement", "load_cell": "force"}.get(block.kind, "chord length change")
         direction = "under-predicted" if np.sign(size) == np.sign(np.mean(meas[i0:i1 + 1])) else "over-predicted"
-        text = (f"{block.kind} {block.name}, {where}: {what} {direction} by {abs(size) * 1000:.2g} mm "
+        amount = f"{abs(size):.3g} kN" if block.kind == "load_cell" else f"{abs(size) * 1000:.2g} mm"
+        text = (f"{block.kind} {block.name}, {where}: {what} {direction} by {amount} "
                 f"({abs(stat):.1f} σ); {100 * share:.0f} % of J")
         out.append(Mismatch(block.name, block.kind, share, where, size, float(abs(stat)), text))
         offset += m

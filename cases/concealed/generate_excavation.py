@@ -1,0 +1,116 @@
+"""Regenerate the concealed cases of a propped excavation: readings from a model WITH the effect (what goes
+wrong in excavations: a cracked wall, a slack prop level, a preload lost, a soft layer at formation, yielding
+behind the wall), on a mesh twice as fine, with noise drawn from each instrument's C_x; the case files describe
+only the baseline (the design's wall, props and strata), which identifies both clays' E and K0.
+
+    python cases/concealed/generate_excavation.py
+
+Each case is written as excavation-<name>.yaml (baseline model, readings_file: excavation-<name>.csv) and
+excavation-<name>.csv; the truth of each is stated in the case file's header and in TRUTH below.
+"""
+from __future__ import annotations
+
+import copy
+import sys
+from pathlib import Path
+
+import yaml
+
+from geoback.case.loading import LoadedCase, case_from_data
+from geoback.commands.simulate import write_readings_csv
+from geoback.inference.synthetic import synthetic_readings
+
+HERE = Path(__file__).resolve().parent
+STAGES = ("lift1", "level1", "lift2", "level2", "lift3")
+
+BASE = {
+    "geometry": {"model": "half", "width": 70.0, "depth": 45.0, "openings": [
+        {"name": "box", "shape": "polygon", "boundary": [[0, 0], [10, 0], [10, -14], [0, -14]],
+         "cuts": [[[0, -4], [10, -4]], [[0, -9], [10, -9]]],
+         "parts": [{"name": "lift1", "contains": [5, -2]}, {"name": "lift2", "contains": [5, -6]},
+                   {"name": "lift3", "contains": [5, -12]}]}]},
+    "ground": {"unit_weight": 19.0, "K0": 0.8, "layers": [
+        {"name": "soft", "top": 0.0, "E": "20 MPa", "nu": 0.3}, {"name": "stiff", "top": 10.0, "E": "80 MPa", "nu": 0.3}]},
+    "mesh": {"size_tunnel": 0.6, "size_far": 6.0},
+    "construction": {
+        "walls": [{"name": "wall", "x": 10.4, "thickness": 0.8, "toe": 24.0, "E": "30 GPa", "nu": 0.2}],
+        "props": [{"name": "P1", "wall": "wall", "depth": 1.5, "E": "210 GPa", "area": 0.02, "spacing": 6.0,
+                   "length": 20.0},
+                  {"name": "P2", "wall": "wall", "depth": 7.0, "E": "210 GPa", "area": 0.015, "spacing": 4.0,
+                   "length": 20.0, "preload": "50 kN/m"}],
+        "stages": [{"name": "lift1", "excavate": ["lift1"]}, {"name": "level1", "install": ["P1"]},
+                   {"name": "lift2", "excavate": ["lift2"]}, {"name": "level2", "install": ["P2"]},
+                   {"name": "lift3", "excavate": ["lift3"]}]},
+    "instruments": [
+        {"name": "I1", "kind": "inclinometer", "x": 10.4, "toe_depth": 24.0, "spacing": 1.0, "sigma": 0.0001,
+         "readings_file": "CSV"},
+        {"name": "S1", "kind": "points", "points": [[11.5, 0.0], [14.0, 0.0], [18.0, 0.0], [24.0, 0.0], [32.0, 0.0],
+                                                    [44.0, 0.0]],
+         "components": ["uy"], "sigma": 0.0005, "readings_file": "CSV"},
+        {"name": "LC1", "kind": "load_cell", "support": "P1", "sigma": 25.0, "readings_file": "CSV"},
+        {"name": "LC2", "kind": "load_cell", "support": "P2", "sigma": 20.0, "readings_file": "CSV"}],
+    "parameters": [{"name": "E[soft]", "initial": "15 MPa", "log": True},
+                   {"name": "E[stiff]", "initial": "60 MPa", "log": True},
+                   {"name": "K0", "initial": 0.7}],
+}
+TRUTH_VALUES = {"E[soft]": 25000.0, "E[stiff]": 90000.0, "K0": 0.9}
+
+# name: (values switched on in the truth, a change to the truth's case, seed, what the header says)
+TRUTH = {
+    "wall-stiffness": ({"E[wall]": 1.0e7}, None, 31,
+                       "the wall's section is cracked: E[wall] = 10 GPa (a third of the design's 30 GPa)"),
+    "support-stiffness": ({"k[P1]": 1.2e4}, None, 32,
+                          "the capping-beam struts P1 take load at 12 MN/m per m run, a sixth of their design "
+                          "stiffness (a slack connection)"),
+    "preload-lost": ({"preload[P2]": 0.0}, None, 33,
+                     "the level-2 props lost their preload at lock-off (0 instead of 50 kN/m)"),
+    "soft-formation": ({}, lambda d: d["ground"]["layers"].insert(
+        1, {"name": "soft2", "top": 10.0, "E": "25 MPa", "nu": 0.3}) or d["ground"]["layers"][2].update(top=16.0),
+        34, "the soft clay reaches 16 m, below the formation, not 10 m as the boreholes said (a soft layer at "
+            "and below formation)"),
+    "yielding": ({}, lambda d: d["ground"]["layers"][0].update(model="mohr-coulomb", c=8.0, phi=22.0, psi=0.0),
+                 35, "the soft clay yields behind and in front of the wall (Mohr-Coulomb c' = 8 kPa, phi' = 22 deg, "
+                     "psi = 0)"),
+    "null": ({}, None, 36, "nothing: the readings come from the baseline model itself (on a finer mesh)"),
+}
+
+
+def case_data(name: str) -> dict:
+    d = copy.deepcopy(BASE)
+    d["name"] = f"concealed-excavation-{name}"
+    for ins in d["instruments"]:
+        ins["readings_file"] = f"excavation-{name}.csv"
+    return d
+
+
+def case_text(name: str, header: str) -> str:
+    lines = [f"# Concealed case 'excavation-{name}' (generated by generate_excavation.py in this folder).",
+             f"# Truth: {header}; E[soft] = 25 MPa, E[stiff] = 90 MPa, K0 = 0.9.",
+             f"# The readings (excavation-{name}.csv) come from that model on a mesh twice as fine, with instrument "
+             f"noise;", "# this file describes only the baseline model. Try: geoback diagnose "
+                        f"cases/concealed/excavation-{name}.yaml"]
+    return "\n".join(lines) + "\n" + yaml.safe_dump(case_data(name), sort_keys=False, width=110)
+
+
+def main(argv=None) -> None:
+    names = (argv if argv is not None else sys.argv[1:]) or list(TRUTH)
+    for name in names:
+        values, change, seed, header = TRUTH[name]
+        truth = case_data(name)
+        for ins in truth["instruments"]:
+            ins.pop("readings_file")
+        if change is not None:
+            change(truth)
+        loaded = LoadedCase(case_from_data(truth), None, {})
+        readings = synthetic_readings(loaded, refine=2.0, values={**TRUTH_VALUES, **values}, noise_seed=seed,
+                                      by_stage=True)
+        not_yet = {"LC1": ("lift1",), "LC2": ("lift1", "level1", "lift2")}
+        readings = {n: {s: v for s, v in sets.items() if s not in not_yet.get(n, ())} for n, sets in readings.items()}
+        (HERE / f"excavation-{name}.yaml").write_text(case_text(name, header))
+        write_readings_csv(loaded, readings, HERE / f"excavation-{name}.csv",
+                           [f"made by generate_excavation.py: {header} (seed {seed})"])
+        print(f"excavation-{name}: {sum(len(v) for s in readings.values() for v in s.values())} readings")
+
+
+if __name__ == "__main__":
+    main()
