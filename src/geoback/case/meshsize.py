@@ -499,6 +499,7 @@ def _section_inputs(case: Case) -> dict:
         "tops": [layer.top for layer in case.ground.layers],
         "names": [layer.name for layer in case.ground.layers],
         "linings": [ln.model_dump(mode="json") for ln in linings],
+        "walls": [[w.x, w.top, w.toe, w.thickness, w.layers] for w in _walls(case)],
         "size_tunnel": wall,
         "size_far": far,
         "size_instruments": m.size_instruments,
@@ -508,10 +509,20 @@ def _section_inputs(case: Case) -> dict:
     }
 
 
-def _section_curves(layout, linings: list) -> tuple[list, list, list]:
+def _walls(case: Case) -> list:
+    from geoback.case.supports import walls
+
+    try:
+        return list(walls(case).values())
+    except Exception:  # noqa: BLE001 - a wall the checks refuse (neither thickness nor EA and EI): not counted
+        return []
+
+
+def _section_curves(layout, linings: list, walls: list = ()) -> tuple[list, list, list]:
     """The curves the section mesh refines towards (every opening's wall, its cut lines within it, in a
     half-model the symmetry axis across it, the linings' bands' edges), as shapely geometries; the
-    linings' bands (polygon, thickness); and the curves meshed finer than the wall's size (the inner
+    linings' and the retaining walls' bands (polygon, element size: t/2 of a lining, t/layers of a wall);
+    and the curves meshed finer than the wall's size (the inner
     face of a band inside a wall that is not a circle is the sampled inset outline: its sides are
     ``layout.SAMPLES`` per turn), each with its edge length."""
     from shapely.geometry import LineString
@@ -537,7 +548,7 @@ def _section_curves(layout, linings: list) -> tuple[list, list, list]:
             continue
         if band.area <= 0:
             continue
-        bands.append((band, lining.thickness))
+        bands.append((band, lining.thickness / 2))
         curves.append(band.boundary)
         op = lay.opening_of(layout, lining.on) or lay.opening_of(layout, lay.regions(layout)[lining.on][0])
         if lining.side == "wall" and op.shape != "circle":
@@ -545,6 +556,13 @@ def _section_curves(layout, linings: list) -> tuple[list, list, list]:
             inner = lay.polygon(op, inset=lining.thickness).exterior
             segment = inner.length / max(len(inner.coords) - 1, 1)
             fine.append((inner.intersection(band.buffer(1e-6 * lining.thickness)), segment))
+    for x, top, toe, thickness, layers in walls:
+        from shapely.geometry import box as shapely_box
+
+        band = shapely_box(x - thickness / 2, -toe, x + thickness / 2, -top).intersection(ground)
+        if band.area > 0:
+            bands.append((band, thickness / layers))
+            curves.append(band.boundary)
     return [c for c in curves if not c.is_empty], bands, [(c, s) for c, s in fine if not c.is_empty]
 
 
@@ -593,13 +611,13 @@ def _integrate_section(inputs: dict) -> tuple[dict[str, float], float]:
     W, H = x1 - x0, depth
     t, far = float(inputs["size_tunnel"]), float(inputs["size_far"])
     growth = math.log1p(float(inputs["growth"]))
-    curves, bands, fine = _section_curves(layout, inputs.get("linings") or [])
+    curves, bands, fine = _section_curves(layout, inputs.get("linings") or [], inputs.get("walls") or [])
     spacing = min(t, far) / 4
     if sum(c.length for c in curves) / spacing > 4 * _MAX_CELLS:  # walls of millions of elements: beyond any limit
         return {"size_far": 0.0, "size_tunnel": math.inf, "size_instruments": 0.0}, math.inf
     wall_pts = _samples(curves, spacing)
     tree = cKDTree(wall_pts) if len(wall_pts) else None
-    sized = [(band, min(t, thickness / 2)) for band, thickness in bands]  # a band meshed at min(wall, t/2)
+    sized = [(band, min(t, size)) for band, size in bands]  # a band meshed at min(wall, its own size)
     fine = fine + [(band.boundary, tb) for band, tb in sized]  # gmsh grades away from a band's short edges
     fine_trees = [(cKDTree(p), s) for c, s in fine if s < t and len(p := _samples([c], s))]
     pts = np.asarray(inputs.get("instrument_points") or [], float).reshape(-1, 2)

@@ -118,6 +118,7 @@ class Factorisation:
             B = rhs.reshape(self.n, -1)
             keys = B if coords is None else np.asarray(coords, dtype=float).reshape(-1, B.shape[1])
             build = (lambda cols: B[:, cols])
+        keys = np.asfortranarray(keys)  # its columns contiguous: the span test reads them one by one
         basis = self._raw if coords is None else \
             self._coords.setdefault(keys.shape[0], _SpanBasis(keys.shape[0], self.n))
         out = np.zeros((self.n, keys.shape[1]))
