@@ -350,3 +350,32 @@ def test_bad_walls_props_and_anchors_are_refused_located():
     d["construction"]["walls"][0]["E"] = None
     e = _error(d)
     assert "construction.walls[0]" in e and "thickness and E, or by EA and EI" in e
+
+
+def test_a_strut_between_two_walls_of_a_full_model_is_the_half_models_prop_to_the_symmetry_plane():
+    """The symmetric pit modelled whole, the struts from wall to wall (`to`), against the half-model whose
+    struts are springs to the symmetry plane with half their length: the same wall movement and strut force
+    (to the difference of the two gmsh meshes)."""
+    half = pit(props=True)
+    half["construction"]["props"][0]["stiffness"] = None
+    half["construction"]["props"][0].update(E=2.1e8, area=0.02, spacing=6.0, length=20.0)
+    full = copy.deepcopy(half)
+    full["geometry"].update(model="full", width=120.0)
+    full["geometry"]["openings"][0].update(boundary=[[-10, 0], [10, 0], [10, -14], [-10, -14]],
+                                           cuts=[[[-10, -4], [10, -4]], [[-10, -9], [10, -9]]])
+    full["construction"]["walls"].append(dict(full["construction"]["walls"][0], name="W2", x=-10.4))
+    for p in full["construction"]["props"]:
+        p.update(to="W2", length=None)
+    a, b = simulation(half), simulation(full)
+    assert b.connectors["P2"].spring_length == pytest.approx(20.0) and a.connectors["P2"].spring_length == 10.0
+    assert a.connectors["P2"].stiffness == pytest.approx(2 * b.connectors["P2"].stiffness)  # shortened twice
+    va, vb = a.quantities(), b.quantities()
+    head = np.array([[10.4, 0.0], [10.4, -7.0], [10.4, -14.0]])
+    ua = a.stage_displacements_at(va, head, "dig3")
+    ub = b.stage_displacements_at(vb, head, "dig3")
+    mirror = b.stage_displacements_at(vb, head * [-1, 1], "dig3")
+    assert np.abs(ub[:, 0] + mirror[:, 0]).max() <= 1e-3 * np.abs(ub[:, 0]).max()  # symmetric
+    assert np.abs(ua - ub).max() <= 0.02 * np.abs(ua).max()
+    for name in ("P1", "P2"):
+        Na, Nb = a.connector_force(va, name, 4)[0], b.connector_force(vb, name, 4)[0]
+        assert Nb == pytest.approx(Na, rel=0.02), name

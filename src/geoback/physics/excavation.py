@@ -581,7 +581,7 @@ class ExcavationSimulation(Simulation):
 
         if not self.plan.walls:
             return None
-        run = run or self._run(values, ())
+        run = run or self._solution(values, ())
         out = {}
         for name, band in self.plan.walls.items():
             depths = self._wall_depths(band)
