@@ -66,6 +66,13 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
         what = tuple(sorted(set(what) | set(exploration_for())))
     exploration = explore(analysis.misfit, res, what, analysis.settings, progress=say,
                           objective_map=objective_map) if what else None
+    if construction is not None and construction.walls:  # walls.csv, supports.csv, the report's section, figures
+        from geoback.inference.explore import Exploration
+        from geoback.worth.walls import of_result
+
+        if say is not None:
+            say("walls and supports: section forces and support forces per stage with their bands")
+        exploration = replace(exploration or Exploration(), walls=of_result(analysis, res))
     write_run(res, Path(out), exploration, plots=plots, readings=lines)
     return res
 

@@ -147,6 +147,10 @@ def report_text(res, exploration=None, readings=()) -> str:
         lines += zone.lines()
     lines += figure_lines(res, exploration)
     text = "\n".join(lines) + "\n"
+    if getattr(exploration, "walls", None) is not None:
+        from geoback.reports.walls import report_section as walls_section
+
+        text += walls_section(exploration.walls)
     if res.forecasts is not None:
         from geoback.reports.forecast_report import report_section
 
@@ -302,6 +306,10 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
         from geoback.reports.fields import write_plastic_zone
 
         write_plastic_zone(exploration.plastic_zone, out)
+    if exploration is not None and getattr(exploration, "walls", None) is not None:
+        from geoback.reports.walls import write_walls
+
+        write_walls(exploration.walls, out)
     if res.forecasts is not None:
         from geoback.reports.forecast_report import HEADER, forecast_rows
 
