@@ -234,8 +234,9 @@ def write_field(field, path: Path, case=None) -> None:
     """Displacement (point data) and cell data (stresses, ...) as VTU for ParaView; more point data
     (the displacement after every construction stage) if the field has it. With `case` (a section
     with openings), each element's state after every stage as cell data 'state[<stage>]': -1
-    excavated, 0 ground, 1 + i the lining i of the mesh's bands standing there (threshold at >= 0 in
-    ParaView to see the section as it stands after that stage)."""
+    excavated, 0 ground, 1 + i the lining or wall i of the mesh's bands standing there (threshold at >= 0
+    in ParaView to see the section as it stands after that stage); with retaining walls, 'wall': 1 + the
+    wall's index in construction.walls on its elements, 0 elsewhere (threshold at >= 1 to see the walls)."""
     from geoback.reports.fields import write_mesh
 
     def vec(v):
@@ -252,6 +253,15 @@ def write_field(field, path: Path, case=None) -> None:
             for k, stage in enumerate(stage_names(case)):
                 void, lining = stage_state(case, field.mesh, k)
                 cells[f"state[{stage}]"] = np.where(void, -1, lining + 1).astype(np.int32)
+            from geoback.reports.section import wall_names
+
+            walls = [i for i, n in enumerate(field.mesh.band_names) if n in wall_names(case)]
+            if walls:  # the retaining walls' elements: 1 + the wall's index in construction.walls, 0 elsewhere
+                order = wall_names(case)
+                mark = np.zeros(len(field.mesh.triangles), np.int32)
+                for i in walls:
+                    mark[field.mesh.band == i] = 1 + order.index(field.mesh.band_names[i])
+                cells["wall"] = mark
     write_mesh(field.mesh, path, point_data=point, cell_data=cells)
 
 
