@@ -681,7 +681,7 @@ class _Forecast(Strict):
     name: str = Field(pattern=NAME, description="unique forecast name (files and figures use it)")
     stage: Optional[StageName] = Field(None, description="construction stage the forecast is for (default: the last)")
     alert: Optional[Positive] = Field(
-        None, description="alert level of the forecast quantity's magnitude, in its unit (m, kN/m, kNm/m): the "
+        None, description="alert level of the forecast quantity's magnitude, in its unit (m, kN/m, kNm/m; kN per prop or anchor): the "
                           "probability that it is exceeded is reported")
 
 
