@@ -291,3 +291,40 @@ def test_field_vtu_marks_the_wall_at_every_stage(model, tmp_path):
     assert np.array_equal(wall == 1, band) and band.any()
     for s in sim.stages:  # standing, as a band (1 + its index), from before the first stage
         assert np.all(m.cell_data[f"state[{s}]"][0][band] == 1 + list(sim.mesh.band_names).index("W"))
+
+
+def test_anchors_tension_per_anchor_their_bands_and_the_summary(tmp_path):
+    import json
+
+    from geoback.reports.plots.walls import supports_figure
+    from geoback.reports.walls import as_dict, write_walls
+    from geoback.worth.walls import walls_and_supports
+
+    data = pit(props=False, anchors=True, size=1.0, far=8.0, preload=80.0)
+    loaded = LoadedCase(case_from_data(copy.deepcopy(data)), None, {})
+    sim = make_simulation(loaded)
+    v = sim.quantities()
+    names = ["E[stiff]", "preload[P1]", "k[P2]"]
+    ws = walls_and_supports(sim, loaded.case, v, names, std_of)
+    stages = list(sim.stages)
+    for name in ("P1", "P2"):
+        s = ws.supports[name]
+        assert s.kind == "anchor"
+        for k in range(stages.index(s.installed), len(stages)):
+            F = _central(lambda u: sim.connector_force(u, name, k)[0], v, names)
+            assert s.std[k] == pytest.approx(std_of(F[None])[0], rel=1e-5, abs=1e-6)
+    assert ws.supports["P1"].force[stages.index("level1")] == pytest.approx(80.0, rel=1e-9)  # locked off at 80
+    write_walls(ws, tmp_path)
+    rows = list(csv.DictReader(open(tmp_path / "supports.csv")))
+    p2 = [r for r in rows if r["support"] == "P2"]
+    assert {r["kind"] for r in rows} == {"anchor"} and all(r["spacing [m]"] == "2.5" for r in p2)
+    for r in p2:
+        assert float(r["force per support [kN]"]) == pytest.approx(2.5 * float(r["force per metre run [kN/m]"]))
+    summary = json.loads(json.dumps(as_dict(ws)))  # JSON-ready
+    last = summary["supports"]["P2"]["stages"][stages[-1]]
+    assert last["force_per_support_kN"] == pytest.approx(2.5 * ws.supports["P2"].force[-1])
+    assert summary["supports"]["P1"]["stages"]["dig1"]["force_kN_per_m"] is None  # not installed yet
+    m = summary["walls"]["W"]["stages"][stages[-1]]
+    assert (m["M_max_kNm_per_m"], m["M_max_depth_m"]) == pytest.approx(ws.walls["W"].largest("M", len(stages) - 1)[:2])
+    texts = " | ".join(_texts(supports_figure(ws)))
+    assert "anchor at 7 m on 'W' (tension +), every 2.5 m" in texts

@@ -65,6 +65,10 @@ def summary(res, exploration=None, readings=()) -> dict:
     zone = getattr(exploration, "plastic_zone", None)
     if zone is not None:
         out["plastic_zone"] = zone.as_dict()
+    if getattr(exploration, "walls", None) is not None:
+        from geoback.reports.walls import as_dict as walls_dict
+
+        out["walls"] = walls_dict(exploration.walls)
     if res.forecasts is not None:
         from geoback.reports.forecast_report import as_dict
 

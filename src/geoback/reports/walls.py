@@ -78,6 +78,38 @@ def write_walls(ws, out: Path) -> list[Path]:
     return paths
 
 
+def _num(v):
+    return float(v) if v is not None and np.isfinite(v) else None
+
+
+def as_dict(ws) -> dict:
+    """summary.json's "walls": per wall and stage the largest bending moment [kNm/m] and deflection
+    [m] (+ towards larger x) with their depths and stds, per support and stage its force per metre run
+    [kN/m] and per prop or anchor [kN] with stds (None before installation or without a band)."""
+    walls = {}
+    for w in ws.walls.values():
+        stages = {}
+        for k, stage in enumerate(w.stages):
+            m, dm, sm = w.largest("M", k)
+            u, du, su = w.largest("ux", k)
+            stages[stage] = {"excavation_level_m": float(w.formation[k]), "M_max_kNm_per_m": _num(m),
+                             "M_max_depth_m": _num(dm), "M_max_std": _num(sm), "ux_max_m": _num(u),
+                             "ux_max_depth_m": _num(du), "ux_max_std": _num(su)}
+        walls[w.name] = {"x_m": w.x, "thickness_m": w.thickness, "toe_m": w.toe, "stages": stages}
+    supports = {}
+    for s in ws.supports.values():
+        stages = {}
+        for k, stage in enumerate(s.stages):
+            sd = None if s.std is None else s.std[k]
+            stages[stage] = {"force_kN_per_m": _num(s.force[k]), "std_kN_per_m": _num(sd),
+                             "force_per_support_kN": _num(s.per_support * s.force[k]) if s.spacing else None,
+                             "std_per_support_kN": _num(s.per_support * sd) if s.spacing and sd is not None
+                             else None}
+        supports[s.name] = {"kind": s.kind, "wall": s.wall, "depth_m": s.depth, "spacing_m": s.spacing,
+                            "installed": s.installed, "stages": stages}
+    return {"z": ws.z, "parameters": list(ws.parameters), "walls": walls, "supports": supports}
+
+
 def _pm(v: float, s, unit: str, z: float, digits: str = ".3g") -> str:
     u = f" {unit}" if unit else ""
     if s is None or not np.isfinite(s):

@@ -309,8 +309,9 @@ class ForecastModel:
         if self.walls:
             q = self._walls(values)
             parts.append(q)
-            if sensitivities:
-                jac.append(self._central(self._walls, values, physical, q))
+            if sensitivities:  # on the discrete function at `values` (a yielding run's increments replayed)
+                fd = self.sim.replaying(values)
+                jac.append(self._central(lambda v: self._walls(v, fd), values, physical, q))
         x = np.concatenate(parts)
         if not sensitivities:
             return x, None
@@ -352,8 +353,8 @@ class ForecastModel:
             q[i], dq[i] = scale * N, scale * np.asarray(dN)
         return q, dq
 
-    def _walls(self, values: dict) -> np.ndarray:
-        wf = self.sim.wall_forces(values)
+    def _walls(self, values: dict, sim=None) -> np.ndarray:
+        wf = (sim or self.sim).wall_forces(values)
         out = []
         for s in self.walls:
             f = wf[s.wall]

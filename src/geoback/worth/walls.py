@@ -116,13 +116,14 @@ def wall_jacobian(sim, values: dict, names: list[str]) -> dict:
     """d(ux, V, M)/d(names) of every wall by central differences: {wall: {q: (stages, depths, n)}} (zero
     for an integration constant of an instrument: no wall force depends on it)."""
     out = {}
+    fd = sim.replaying(values)  # the same discrete function of the values (a yielding run's increments)
     for j, n in enumerate(names):
         if is_constant(n):
             continue
         h = STEP * max(abs(values[n]), 1e-3)
         up, down = dict(values), dict(values)
         up[n], down[n] = values[n] + h, values[n] - h
-        a, b = sim.wall_forces(up), sim.wall_forces(down)
+        a, b = fd.wall_forces(up), fd.wall_forces(down)
         for w in a:
             d = out.setdefault(w, {})
             for q in ("ux", "V", "M"):
