@@ -51,7 +51,15 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
     zone = sim.plastic_zone(values)
     from geoback.worth.walls import walls_and_supports
 
-    walls = walls_and_supports(sim, analysis.case, values)  # None without walls (no band: nothing identified)
+    from geoback.worth.walls import WallsUnavailable
+
+    try:
+        walls = walls_and_supports(sim, analysis.case, values)  # None without walls (no band: nothing identified)
+    except WallsUnavailable as exc:  # refused rather than written wrong
+        import sys
+
+        print(f"walls.csv, supports.csv not written: {exc}", file=sys.stderr)
+        walls = None
     with result_set(out, "simulate") as staging:  # the previous set replaced as a whole
         write_csv(staging / "predicted.csv", header, rows)
         write_json(staging / "predicted.json", {

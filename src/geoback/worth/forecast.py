@@ -274,6 +274,7 @@ class ForecastModel:
         self.lining = [s for s in specs if s.kind == "lining"]
         self.supports = [s for s in specs if s.kind == "support"]
         self.walls = [s for s in specs if s.kind == "wall"]
+        self._walls_checked = False
         self._view = None  # the simulation reading the forecasts' blocks, inside reading()
 
     @contextmanager
@@ -307,6 +308,11 @@ class ForecastModel:
             if sensitivities:
                 jac.append(dq)
         if self.walls:
+            if not self._walls_checked:  # the simulation's wall forces are of its own solution (else refused)
+                from geoback.worth.walls import checked_wall_forces
+
+                checked_wall_forces(self.sim, values)
+                self._walls_checked = True
             q = self._walls(values)
             parts.append(q)
             if sensitivities:  # on the discrete function at `values` (a yielding run's increments replayed)

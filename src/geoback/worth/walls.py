@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from geoback.errors import GeobackError
 from geoback.physics.simulation import is_constant
 
 STEP = 1e-4  # relative central-difference step of the wall's section forces
@@ -108,6 +109,33 @@ def formation_levels(case, band, stages) -> np.ndarray:
     return out
 
 
+class WallsUnavailable(GeobackError):
+    """The simulation's wall forces are not of its own solution (refused rather than written wrong)."""
+
+
+def checked_wall_forces(sim, values: dict):
+    """``sim.wall_forces(values)``, checked against the simulation's own displacements: each wall's
+    centreline deflection after every stage it stands must be the ground's displacement there
+    (``stage_displacements_at``). A simulation whose wall forces come from another run (e.g. a linear
+    run of yielding ground) is refused (WallsUnavailable), never written."""
+    forces = sim.wall_forces(values)
+    for name, f in (forces or {}).items():
+        band = sim.plan.walls[name]
+        pick = np.unique(np.linspace(0, len(f.depths) - 1, 9).astype(int))
+        pts = np.column_stack([np.full(len(pick), band.x), -np.asarray(f.depths)[pick]])
+        for k, stage in enumerate(f.stages):
+            if not np.isfinite(f.ux[k]).all():
+                continue
+            u = sim.stage_displacements_at(values, pts, stage)[:, 0]
+            if np.abs(f.ux[k][pick] - u).max() > 1e-6 * max(np.abs(u).max(), 1e-9):
+                raise WallsUnavailable(
+                    f"the section forces of wall '{name}' do not come from this model's solution (the wall's "
+                    f"deflection after stage '{stage}' is {1e3 * f.ux[k][pick][0]:.4g} mm at its top, the "
+                    f"ground's there {1e3 * u[0]:.4g} mm): walls.csv, supports.csv and wall forecasts are not "
+                    f"available for {type(sim).__name__} yet")
+    return forces
+
+
 def _physical(names) -> list[str]:  # the named values of the model (not instruments' constants)
     return [n for n in names if not is_constant(n)]
 
@@ -155,7 +183,7 @@ def walls_and_supports(sim, case, values: dict, names=(), std_of=None, z: float 
     if not physical:
         names = []
     stages = tuple(sim.stages)
-    forces = sim.wall_forces(values)
+    forces = checked_wall_forces(sim, values)
     jac = wall_jacobian(sim, values, names) if names else {}
     walls = {}
     for w, f in forces.items():
