@@ -29,3 +29,8 @@ def test_the_propped_case_run_writes_walls_supports_and_their_figures(tmp_path):
     assert float(fc[0]["std"]) == pytest.approx(float(sup[0]["force per support_std [kN]"]), rel=1e-6)
     assert "axial force" in report and "thrust" not in report.split("## Forecasts")[1]
     assert "from the tunnel axis" not in report
+    import json
+
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    p2 = summary["walls"]["supports"]["P2"]["stages"]["lift3"]
+    assert p2["force_per_support_kN"] == pytest.approx(float(sup[0]["force per support [kN]"]))
