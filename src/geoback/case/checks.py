@@ -572,6 +572,8 @@ def forecast_problems(case: Case) -> list[tuple[tuple, str]]:
         elif f.kind == "instrument" and f.instrument not in instruments:
             out.append((at + ("instrument",), f"expected the name of an instrument of the case "
                                               f"({', '.join(instruments) or 'none'}), found '{f.instrument}'"))
+        elif f.kind in ("support", "wall"):
+            out.extend(_structure_forecast_problem(case, at, f, stages, stage))
         elif f.kind == "lining":
             if lining is None:
                 out.append((at + ("kind",), "expected a case with a lining (construction.lining) for a lining "
@@ -581,6 +583,28 @@ def forecast_problems(case: Case) -> list[tuple[tuple, str]]:
                                              f"({stages[installed] if installed is not None else 'never installed'}), "
                                              f"found '{stages[stage]}'"))
     return out
+
+
+def _structure_forecast_problem(case: Case, at: tuple, f, stages: list[str], stage: int) -> list[tuple[tuple, str]]:
+    """A support or wall forecast names a prop, anchor or wall of the case, at or after its installation."""
+    c = case.construction
+    walls = [w.name for w in (getattr(c, "walls", None) or [])] if c is not None else []
+    if not walls:
+        return [(at + ("kind",), f"expected a case with retaining walls (construction.walls) for a {f.kind} forecast, "
+                                 "found none")]
+    if f.kind == "support":
+        known = [s.name for s in (c.props or []) + (c.anchors or [])]
+        name, field, what = f.support, "support", "a prop or anchor (construction.props, construction.anchors)"
+    else:
+        known, name, field, what = walls, f.wall, "wall", "a wall (construction.walls)"
+    if name not in known:
+        return [(at + (field,), f"expected the name of {what}: {', '.join(known) or 'none'}; found '{name}'")]
+    installs = [k for k, s in enumerate(c.stages)
+                if name in ([s.install] if isinstance(s.install, str) else (s.install or []))]
+    if installs and stage < installs[0]:
+        return [(at + ("stage",), f"expected a stage at or after {field} '{name}' is installed "
+                                  f"('{stages[installs[0]]}'), found '{stages[stage]}'")]
+    return []
 
 
 def _reading_count(ins) -> int:

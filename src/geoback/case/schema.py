@@ -681,7 +681,7 @@ class _Forecast(Strict):
     name: str = Field(pattern=NAME, description="unique forecast name (files and figures use it)")
     stage: Optional[StageName] = Field(None, description="construction stage the forecast is for (default: the last)")
     alert: Optional[Positive] = Field(
-        None, description="alert level of the forecast quantity's magnitude, in its unit (m, kN/m, kNm/m): the "
+        None, description="alert level of the forecast quantity's magnitude, in its unit (m, kN/m, kNm/m; kN per prop or anchor): the "
                           "probability that it is exceeded is reported")
 
 
@@ -726,8 +726,25 @@ class LiningForecast(_Forecast):
     quantities: list[Literal["N", "M", "V"]] = Field(["N", "M"], min_length=1)
 
 
-Forecast = Annotated[Union[PointsForecast, LineForecast, ChordForecast, InstrumentForecast, LiningForecast],
-                     Field(discriminator="kind")]
+class SupportForecast(_Forecast):
+    """The axial force of a prop (compression +) or a ground anchor (tension +) at `stage`: per prop or
+    anchor [kN] when the support gives a spacing, else per metre run of wall [kN/m]."""
+
+    kind: Literal["support"]
+    support: str = Field(pattern=NAME, description="the prop or anchor (construction.props / anchors)")
+
+
+class WallForecast(_Forecast):
+    """A retaining wall's bending moment M [kNm/m], shear V [kN/m] or deflection ux [m] (+ towards larger
+    x) against depth at `stage`, per metre run."""
+
+    kind: Literal["wall"]
+    wall: str = Field(pattern=NAME, description="the wall (construction.walls)")
+    quantities: list[Literal["M", "V", "ux"]] = Field(["M"], min_length=1)
+
+
+Forecast = Annotated[Union[PointsForecast, LineForecast, ChordForecast, InstrumentForecast, LiningForecast,
+                           SupportForecast, WallForecast], Field(discriminator="kind")]
 
 
 class _Candidate(Strict):

@@ -303,6 +303,7 @@ def _simulate(case, out, vtu, set_, refine, noise, seed, readings_out, as_json, 
     typer.echo(f"{analysis.simulation.survey.m} readings predicted on {res['dofs']} dofs"
                f"{' with ' + used if used else ''} -> {folder}/predicted.csv"
                + (", lining.csv, lining.png" if res.get("lining") is not None else "")
+               + (", walls.csv, supports.csv, walls.png" if res.get("walls") is not None else "")
                + (", predicted.png" if plots else ""), err=as_json)
 
 

@@ -66,6 +66,23 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
         what = tuple(sorted(set(what) | set(exploration_for())))
     exploration = explore(analysis.misfit, res, what, analysis.settings, progress=say,
                           objective_map=objective_map) if what else None
+    if construction is not None and construction.walls:  # walls.csv, supports.csv, the report's section, figures
+        from geoback.inference.explore import Exploration
+        from geoback.worth.walls import of_result
+
+        from geoback.worth.walls import WallsUnavailable
+
+        if say is not None:
+            say("walls and supports: section forces and support forces per stage with their bands")
+        try:
+            exploration = replace(exploration or Exploration(), walls=of_result(analysis, res))
+        except WallsUnavailable as exc:  # refused, said and kept with the results: never written wrong
+            from geoback.inference.caveats import Caveat
+
+            if say is not None:
+                say(f"walls and supports: not written: {exc}")
+            res = replace(res, caveats=tuple(res.caveats) + (Caveat("walls-skipped", f"walls.csv and supports.csv "
+                                                                                      f"not written: {exc}"),))
     write_run(res, Path(out), exploration, plots=plots, readings=lines)
     return res
 

@@ -49,6 +49,17 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
     rows = reading_rows(sim.survey.labels, x, measured)
     forces = sim.lining_forces(values)
     zone = sim.plastic_zone(values)
+    from geoback.worth.walls import walls_and_supports
+
+    from geoback.worth.walls import WallsUnavailable
+
+    try:
+        walls = walls_and_supports(sim, analysis.case, values)  # None without walls (no band: nothing identified)
+    except WallsUnavailable as exc:  # refused rather than written wrong
+        import sys
+
+        print(f"walls.csv, supports.csv not written: {exc}", file=sys.stderr)
+        walls = None
     with result_set(out, "simulate") as staging:  # the previous set replaced as a whole
         write_csv(staging / "predicted.csv", header, rows)
         write_json(staging / "predicted.json", {
@@ -86,6 +97,23 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
                 save_figures({"predicted": fig}, staging)
             finally:
                 fig.clear()
+        if walls is not None:  # walls.csv, supports.csv and their figures
+            import matplotlib
+
+            from geoback.reports.plots import save_figures
+            from geoback.reports.plots.common import RC
+            from geoback.reports.plots.walls import supports_figure, walls_figure
+            from geoback.reports.walls import write_walls
+
+            write_walls(walls, staging)
+            with matplotlib.rc_context(RC):
+                figs = {k: f for k, f in (("walls", walls_figure(walls)), ("supports", supports_figure(walls)))
+                        if f is not None}
+            try:
+                save_figures(figs, staging)
+            finally:
+                for f in figs.values():
+                    f.clear()
         if zone is not None:  # the yielded ground: CSV and figure
             from geoback.reports.fields import write_plastic_zone
             from geoback.reports.plots import save_figures
@@ -97,7 +125,7 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
                 save_figures({"plastic_zone": fig}, staging)
             finally:
                 fig.clear()
-    return {"readings": x, "dofs": sim.dofs, "lining": forces, "plastic_zone": zone}
+    return {"readings": x, "dofs": sim.dofs, "lining": forces, "plastic_zone": zone, "walls": walls}
 
 
 def without_readings(path: Path) -> LoadedCase:

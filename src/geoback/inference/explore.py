@@ -99,6 +99,8 @@ class Exploration:
     seconds: float = 0.0
     refactorises: bool | None = None  # the probe: a point off the estimate needs its own factorisation
     # (or a non-linear run); None when not probed
+    walls: object | None = None  # worth.walls.WallsAndSupports at the estimate with their bands (cases with
+    # walls; set by `geoback run`, which may call worth: this room may not)
 
 
 def other_method(method: str) -> str:

@@ -8,10 +8,21 @@ from geoback.inference.caveats import Caveat
 
 HEADER = ["forecast", "kind", "stage", "quantity", "unit", "x", "y", "position", "position_is", "value", "std",
           "low95", "high95", "sampled_low95", "sampled_high95", "alert", "p_exceed", "sampled_p_exceed"]
-SHOW = {"m": (1e3, "mm"), "kN/m": (1.0, "kN/m"), "kNm/m": (1.0, "kNm/m")}
+SHOW = {"m": (1e3, "mm"), "kN/m": (1.0, "kN/m"), "kNm/m": (1.0, "kNm/m"), "kN": (1.0, "kN")}
 WHAT = {"ux": "horizontal displacement", "uy": "vertical displacement (up +)", "chord": "chord length change",
         "along": "displacement along the line", "normal": "displacement normal to the line", "N": "thrust",
         "M": "bending moment", "V": "shear force"}
+
+
+def quantity_words(fc, i: int) -> str:
+    """What row i of the forecasts is, in words: a lining's N is its thrust, a prop's or anchor's (a
+    support forecast, a load cell's reading) its axial force; a wall's ux its deflection."""
+    q, kind = fc.quantity[i], fc.kind[i]
+    if q == "N" and kind != "lining":
+        return "axial force"
+    if q == "ux" and kind == "wall":
+        return "wall deflection (+ towards larger x)"
+    return WHAT.get(q, q)
 
 
 def positions(fc, rows) -> tuple[np.ndarray, str]:
@@ -51,8 +62,10 @@ def forecast_rows(fc) -> list[list]:
 
 
 def _show(v: float, unit: str) -> str:
+    from geoback.units import number
+
     f, u = SHOW.get(unit, (1.0, unit))
-    return f"{v * f:.3g} {u}"
+    return f"{number(float(v * f), 3)} {u}"
 
 
 def _where(fc, i: int) -> str:
@@ -60,7 +73,7 @@ def _where(fc, i: int) -> str:
     pos, label = positions(fc, rows)
     at = float(pos[int(np.flatnonzero(rows == i)[0])])
     if label.startswith("offset"):
-        return f"at {at:.3g} m from the tunnel axis"
+        return f"at {at:.3g} m from the {'symmetry' if 'symmetry' in label else 'tunnel'} axis"
     if label.startswith("x,"):
         return f"at x = {at:.3g} m"
     if label.startswith("distance along"):
@@ -74,6 +87,12 @@ def _where(fc, i: int) -> str:
     return f"at ({fc.x[i]:.3g}, {fc.y[i]:.3g})"
 
 
+def _percent(p: float) -> str:
+    from geoback.units import number
+
+    return number(float(100 * p), 2) if np.isfinite(p) else "n/a"
+
+
 def summary_lines(fc) -> list[str]:
     """One line per forecast and quantity: the largest magnitude with its band, the alert's chance."""
     out = []
@@ -83,7 +102,7 @@ def summary_lines(fc) -> list[str]:
             sel = [i for i in rows if fc.quantity[i] == q]
             i = max(sel, key=lambda k: abs(fc.value[k]))
             u = fc.unit[i]
-            text = (f"- **{name}** ({WHAT.get(q, q)}, stage {fc.stage[i]}): "
+            text = (f"- **{name}** ({quantity_words(fc, i)}, stage {fc.stage[i]}): "
                     + (f"largest magnitude {_show(fc.value[i], u)} {_where(fc, i)}" if len(sel) > 1
                        else f"{_show(fc.value[i], u)}")
                     + f" ± {_show(fc.std[i], u)} (95 % [{_show(fc.low[i], u)}, {_show(fc.high[i], u)}]")
@@ -95,7 +114,7 @@ def summary_lines(fc) -> list[str]:
                 k = max(alerts, key=lambda j: fc.p_exceed[j])
                 p = fc.p_exceed[k]
                 text += (f"; probability that |{q}| exceeds the alert level {_show(fc.alert[k], u)}: "
-                         f"{100 * p:.2g} %" + (f" (sampled {100 * fc.sampled_exceed[k]:.2g} %)"
+                         f"{_percent(p)} %" + (f" (sampled {_percent(fc.sampled_exceed[k])} %)"
                                                if fc.sampled_exceed is not None else "")
                          + (f" {_where(fc, k)}" if len(sel) > 1 else ""))
             out.append(text)

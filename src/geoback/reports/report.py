@@ -65,6 +65,10 @@ def summary(res, exploration=None, readings=()) -> dict:
     zone = getattr(exploration, "plastic_zone", None)
     if zone is not None:
         out["plastic_zone"] = zone.as_dict()
+    if getattr(exploration, "walls", None) is not None:
+        from geoback.reports.walls import as_dict as walls_dict
+
+        out["walls"] = walls_dict(exploration.walls)
     if res.forecasts is not None:
         from geoback.reports.forecast_report import as_dict
 
@@ -147,6 +151,10 @@ def report_text(res, exploration=None, readings=()) -> str:
         lines += zone.lines()
     lines += figure_lines(res, exploration)
     text = "\n".join(lines) + "\n"
+    if getattr(exploration, "walls", None) is not None:
+        from geoback.reports.walls import report_section as walls_section
+
+        text += walls_section(exploration.walls)
     if res.forecasts is not None:
         from geoback.reports.forecast_report import report_section
 
@@ -230,8 +238,9 @@ def write_field(field, path: Path, case=None) -> None:
     """Displacement (point data) and cell data (stresses, ...) as VTU for ParaView; more point data
     (the displacement after every construction stage) if the field has it. With `case` (a section
     with openings), each element's state after every stage as cell data 'state[<stage>]': -1
-    excavated, 0 ground, 1 + i the lining i of the mesh's bands standing there (threshold at >= 0 in
-    ParaView to see the section as it stands after that stage)."""
+    excavated, 0 ground, 1 + i the lining or wall i of the mesh's bands standing there (threshold at >= 0
+    in ParaView to see the section as it stands after that stage); with retaining walls, 'wall': 1 + the
+    wall's index in construction.walls on its elements, 0 elsewhere (threshold at >= 1 to see the walls)."""
     from geoback.reports.fields import write_mesh
 
     def vec(v):
@@ -248,6 +257,15 @@ def write_field(field, path: Path, case=None) -> None:
             for k, stage in enumerate(stage_names(case)):
                 void, lining = stage_state(case, field.mesh, k)
                 cells[f"state[{stage}]"] = np.where(void, -1, lining + 1).astype(np.int32)
+            from geoback.reports.section import wall_names
+
+            walls = [i for i, n in enumerate(field.mesh.band_names) if n in wall_names(case)]
+            if walls:  # the retaining walls' elements: 1 + the wall's index in construction.walls, 0 elsewhere
+                order = wall_names(case)
+                mark = np.zeros(len(field.mesh.triangles), np.int32)
+                for i in walls:
+                    mark[field.mesh.band == i] = 1 + order.index(field.mesh.band_names[i])
+                cells["wall"] = mark
     write_mesh(field.mesh, path, point_data=point, cell_data=cells)
 
 
@@ -302,6 +320,10 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
         from geoback.reports.fields import write_plastic_zone
 
         write_plastic_zone(exploration.plastic_zone, out)
+    if exploration is not None and getattr(exploration, "walls", None) is not None:
+        from geoback.reports.walls import write_walls
+
+        write_walls(exploration.walls, out)
     if res.forecasts is not None:
         from geoback.reports.forecast_report import HEADER, forecast_rows
 

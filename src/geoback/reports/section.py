@@ -62,7 +62,28 @@ def whole_title(case) -> str:
 
 
 def zoom_title(case) -> str:
-    return "Around the openings" if has_openings(case) and len(case.geometry.openings) > 1 else "Around the tunnel"
+    if has_openings(case) and len(case.geometry.openings) > 1:
+        return "Around the openings"
+    if has_openings(case) and wall_names(case):
+        return "Around the excavation"
+    return "Around the tunnel"
+
+
+def wall_names(case) -> list[str]:
+    """The retaining walls of the case (construction.walls), by name."""
+    c = getattr(case, "construction", None)
+    return [w.name for w in (getattr(c, "walls", None) or [])] if c is not None else []
+
+
+def instrument_label(case, block) -> str:
+    """An instrument as a legend names it: a load cell with the prop or anchor it reads."""
+    if block.kind == "load_cell":
+        ins = next((i for i in case.instruments if i.name == block.name), None)
+        support = getattr(ins, "support", None)
+        c = getattr(case, "construction", None)
+        kind = "anchor" if c is not None and any(a.name == support for a in (c.anchors or [])) else "prop"
+        return f"{block.name} (load cell on {kind} '{support}')"
+    return f"{block.name} ({block.kind.replace('_', ' ')}) stations"
 
 
 def frames(case) -> tuple:
@@ -122,7 +143,9 @@ def stage_names(case) -> list[str]:
 def stage_state(case, mesh, k: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(void, lining) per element of a section mesh after stage k (default the last): `void` the
     elements excavated and not lined, `lining` the index into mesh.band_names of the lining standing
-    in the element (-1: none). A mesh without parts (a circular tunnel's) has neither."""
+    in the element (-1: none; a retaining wall counts as a lining band, standing from its installation,
+    or from the start when no stage installs it). A mesh without parts (a circular tunnel's) has
+    neither."""
     n = len(mesh.triangles)
     part = getattr(mesh, "part", None)
     if part is None or not has_openings(case):
@@ -134,6 +157,9 @@ def stage_state(case, mesh, k: int | None = None) -> tuple[np.ndarray, np.ndarra
     void = np.zeros(n, bool)
     lining = -np.ones(n, np.int64)
     names = list(mesh.band_names)
+    for name in plan.walls or {}:  # a wall in place before construction (wished in place)
+        if name in names and plan.installed_at(name) < 0:
+            lining[mesh.band == names.index(name)] = names.index(name)
     for step in plan.steps[:k + 1]:
         for region in step.excavate:
             if region in mesh.part_names:

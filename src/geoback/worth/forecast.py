@@ -39,7 +39,8 @@ from geoback.physics.simulation import is_constant
 
 UNITS = {"ux": "m", "uy": "m", "chord": "m", "along": "m", "normal": "m", "N": "kN/m", "M": "kNm/m", "V": "kN/m"}
 WORDS = {"points": "displacement", "line": "displacement along a line", "convergence": "chord length change",
-         "instrument": "instrument readings", "lining": "lining section forces"}
+         "instrument": "instrument readings", "lining": "lining section forces",
+         "support": "axial force of a prop or anchor", "wall": "retaining wall section forces"}
 DRAWS, SECONDS = 400, 20.0  # sampling check: at most this many draws, within about this many seconds
 
 
@@ -186,9 +187,12 @@ class _Spec:
     stage: str
     alert: float
     block: object | None = None  # an InstrumentBlock at `stage`
-    quantities: tuple = ()  # lining
+    quantities: tuple = ()  # lining, wall
     position: np.ndarray | None = None
     position_label: str = ""
+    support: str | None = None  # a prop or anchor (kind 'support')
+    wall: str | None = None  # a retaining wall (kind 'wall')
+    unit: str | None = None  # the rows' unit where the quantity alone does not say it (a load cell's force)
 
 
 def _specs(loaded, stages: list[str]) -> list[_Spec]:
@@ -210,8 +214,9 @@ def _specs(loaded, stages: list[str]) -> list[_Spec]:
             xy, a = np.asarray(pts), np.asarray(f.start, float)
             if f.start[1] == f.end[1]:  # horizontal: by offset from the tunnel's axis (a full model: by x)
                 full = getattr(loaded.case.geometry, "model", "half") == "full"
+                axis = "symmetry axis" if hasattr(loaded.case.geometry, "openings") else "tunnel axis"
                 s.position, s.position_label = xy[:, 0], "x, horizontal position [m]" if full else \
-                    "offset from the tunnel axis [m]"
+                    f"offset from the {axis} [m]"
             elif f.start[0] == f.end[0]:  # vertical: by depth
                 s.position, s.position_label = -xy[:, 1], "depth [m]"
             else:
@@ -232,6 +237,14 @@ def _specs(loaded, stages: list[str]) -> list[_Spec]:
                 s.position, s.position_label = np.cumsum(b.lengths), "distance from the reference end [m]"
             else:
                 s.position, s.position_label = np.arange(1.0, m + 1), "reading"
+            if b.kind == "load_cell":  # the force of one prop or anchor (per metre run without a spacing)
+                s.unit = support_unit(loaded.case, case.instruments[b.index].support)
+        elif f.kind == "support":
+            s.support, s.unit = f.support, support_unit(loaded.case, f.support)
+            s.position, s.position_label = np.array([1.0]), "support"
+        elif f.kind == "wall":
+            s.wall, s.quantities = f.wall, tuple(f.quantities)
+            s.position_label = "depth [m]"
         else:
             s.quantities = tuple(f.quantities)
             s.position_label = "angle from the crown [deg]"
@@ -239,6 +252,16 @@ def _specs(loaded, stages: list[str]) -> list[_Spec]:
             s.block = s.block.at(stage)
         out.append(s)
     return out
+
+
+def support_unit(case, name: str) -> str:
+    """The unit of a prop's or anchor's force as a load cell reads it and a forecast gives it: kN per
+    prop or anchor where the case gives their spacing, else kN per metre run of wall."""
+    c = case.construction
+    for sup in (c.props or []) + (c.anchors or []):
+        if sup.name == name:
+            return "kN" if sup.spacing is not None else "kN/m"
+    return "kN/m"
 
 
 # ---------------------------------------------------------------------------- evaluation
@@ -249,6 +272,9 @@ class ForecastModel:
         self.sim, self.specs = simulation, specs
         self.blocks = [s.block for s in specs if s.block is not None]
         self.lining = [s for s in specs if s.kind == "lining"]
+        self.supports = [s for s in specs if s.kind == "support"]
+        self.walls = [s for s in specs if s.kind == "wall"]
+        self._walls_checked = False
         self._view = None  # the simulation reading the forecasts' blocks, inside reading()
 
     @contextmanager
@@ -276,6 +302,22 @@ class ForecastModel:
             parts.append(q)
             if sensitivities:
                 jac.append(self._lining_jacobian(values, physical, q))
+        if self.supports:  # exact: the staged run's direct sensitivities
+            q, dq = self._supports(values, physical if sensitivities else [])
+            parts.append(q)
+            if sensitivities:
+                jac.append(dq)
+        if self.walls:
+            if not self._walls_checked:  # the simulation's wall forces are of its own solution (else refused)
+                from geoback.worth.walls import checked_wall_forces
+
+                checked_wall_forces(self.sim, values)
+                self._walls_checked = True
+            q = self._walls(values)
+            parts.append(q)
+            if sensitivities:  # on the discrete function at `values` (a yielding run's increments replayed)
+                fd = self.sim.replaying(values)
+                jac.append(self._central(lambda v: self._walls(v, fd), values, physical, q))
         x = np.concatenate(parts)
         if not sensitivities:
             return x, None
@@ -294,29 +336,65 @@ class ForecastModel:
 
     def _lining_jacobian(self, values: dict, names: list[str], q0: np.ndarray) -> np.ndarray:
         """Central differences (relative step 1e-4; the section forces are smooth in every value)."""
+        return self._central(self._lining, values, names, q0)
+
+    @staticmethod
+    def _central(f, values: dict, names: list[str], q0: np.ndarray) -> np.ndarray:
         A = np.zeros((len(q0), len(names)))
         for j, n in enumerate(names):
             h = 1e-4 * max(abs(values[n]), 1e-3)
             up, down = dict(values), dict(values)
             up[n], down[n] = values[n] + h, values[n] - h
-            A[:, j] = (self._lining(up) - self._lining(down)) / (2 * h)
+            A[:, j] = (f(up) - f(down)) / (2 * h)
         return A
 
+    def _supports(self, values: dict, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """Each support forecast's axial force (per prop or anchor where it has a spacing) and its exact
+        sensitivity (``ExcavationSimulation.connector_force``)."""
+        q, dq = np.zeros(len(self.supports)), np.zeros((len(self.supports), len(names)))
+        stages = list(self.sim.stages)
+        for i, s in enumerate(self.supports):
+            scale = self.sim.connectors[s.support].per_support()
+            N, dN = self.sim.connector_force(values, s.support, stages.index(s.stage), wrt=list(names))
+            q[i], dq[i] = scale * N, scale * np.asarray(dN)
+        return q, dq
+
+    def _walls(self, values: dict, sim=None) -> np.ndarray:
+        wf = (sim or self.sim).wall_forces(values)
+        out = []
+        for s in self.walls:
+            f = wf[s.wall]
+            k = list(f.stages).index(s.stage)
+            out += [getattr(f, q)[k] for q in s.quantities]
+        return np.concatenate(out)
+
     def layout(self, values: dict):
-        """Row labels: forecast, kind, stage, quantity, x, y, position, position label, alert."""
+        """Row labels: forecast, kind, stage, quantity, x, y, position, position label, alert, unit."""
         rows = []
         for s in self.specs:
             if s.block is None:
                 continue
             for lab, pos in zip(s.block.labels, s.position):
                 rows.append((s.name, s.kind, s.stage, lab.component, lab.x, lab.y, float(pos), s.position_label,
-                             s.alert))
+                             s.alert, s.unit or UNITS.get(lab.component, "m")))
         if self.lining:
             lf = self.sim.lining_forces(values)
             for s in self.lining:
                 for q in s.quantities:
                     for a, (px, py) in zip(lf.angle, lf.points):
-                        rows.append((s.name, s.kind, s.stage, q, px, py, float(a), s.position_label, s.alert))
+                        rows.append((s.name, s.kind, s.stage, q, px, py, float(a), s.position_label, s.alert,
+                                     UNITS[q]))
+        for s in self.supports:
+            hx, hy = self.sim.connectors[s.support].head
+            rows.append((s.name, s.kind, s.stage, "N", hx, hy, 1.0, s.position_label, s.alert, s.unit))
+        if self.walls:
+            wf = self.sim.wall_forces(values)
+            for s in self.walls:
+                x = self.sim.plan.walls[s.wall].x
+                for q in s.quantities:
+                    for d in wf[s.wall].depths:
+                        rows.append((s.name, s.kind, s.stage, q, x, -float(d), float(d), s.position_label, s.alert,
+                                     UNITS[q]))
         return rows
 
 
@@ -393,7 +471,7 @@ def _forecast(model: ForecastModel, analysis, result, n: int, seconds: float, se
     rows = model.layout(values)
     alert = np.array([r[8] for r in rows], float)
     out = Forecasts([r[0] for r in rows], [r[1] for r in rows], [r[2] for r in rows], [r[3] for r in rows],
-                    [UNITS.get(r[3], "m") for r in rows], np.array([r[4] for r in rows]),
+                    [r[9] for r in rows], np.array([r[4] for r in rows]),
                     np.array([r[5] for r in rows]), np.array([r[6] for r in rows]), [r[7] for r in rows],
                     q, std, q - z * std, q + z * std, F, Cq, list(params.names), z, Cp, alert,
                     _exceed(q, std, alert))

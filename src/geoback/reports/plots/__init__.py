@@ -10,7 +10,9 @@
 - ``mesh``: the finite-element mesh by layer, with the instruments' stations;
 - ``lining``: thrust, bending moment and shear around the lining per construction stage (models
   with a lining only);
-- ``plastic``: the plastic zone around the tunnel after every stage (ground that can yield only).
+- ``plastic``: the plastic zone around the tunnel after every stage (ground that can yield only);
+- ``walls``: each retaining wall's deflection, bending moment and shear against depth per stage, and
+  the props' and anchors' forces per stage (``supports``) (cases with walls only).
 
 Figures are built as :class:`matplotlib.figure.Figure` objects without pyplot (no global state,
 headless) from an ``Identification`` and an ``Exploration`` (``geoback.inference.explore``): building them
@@ -35,15 +37,18 @@ from geoback.reports.plots.measured import measured_vs_predicted_figure
 from geoback.reports.plots.mesh import mesh_figure
 from geoback.reports.plots.objective import objective_contours_figure
 from geoback.reports.plots.plastic import plastic_zone_figure
+from geoback.reports.plots.walls import supports_figure, walls_figure
 
 FIGURES = ("objective_contours", "convergence", "information_density", "instruments", "field",
            "measured_vs_predicted", "mesh")
-OPTIONAL = ("lining", "plastic_zone")  # figures of what only some models have, built when the exploration holds it
+OPTIONAL = ("lining", "plastic_zone", "walls", "supports")  # figures of what only some models have, built when
+# the exploration holds it
 FORMATS = ("png", "svg")
 NEEDS = {"objective_contours": ("slice", "other"), "convergence": ("other",), "information_density": (),
          "instruments": ("profiles",), "field": ("field", "profiles"), "measured_vs_predicted": (),
          "mesh": ("field",),
-         "lining": ("lining",), "plastic_zone": ("plastic_zone",)}  # what each reads from the exploration
+         "lining": ("lining",), "plastic_zone": ("plastic_zone",),
+         "walls": (), "supports": ()}  # what each reads from the exploration (walls: set by `geoback run`)
 _BUILD = {"objective_contours": objective_contours_figure, "convergence": convergence_figure,
           "information_density": lambda res, exploration: information_density_figure(res),
           "instruments": instruments_figure, "field": field_figure,
@@ -51,7 +56,10 @@ _BUILD = {"objective_contours": objective_contours_figure, "convergence": conver
           "mesh": lambda res, exploration: mesh_figure(exploration.field.mesh, res.case, res.data.blocks, res.name),
           "lining": lambda res, exploration: lining_figure(exploration.lining, res) if exploration.lining else None,
           "plastic_zone": lambda res, exploration: (plastic_zone_figure(exploration.plastic_zone, res)
-                                                    if exploration.plastic_zone else None)}
+                                                    if exploration.plastic_zone else None),
+          "walls": lambda res, exploration: walls_figure(getattr(exploration, "walls", None), res),
+          "supports": lambda res, exploration: supports_figure(getattr(exploration, "walls", None), res)}
+HOLDS = {"supports": lambda exploration: getattr(getattr(exploration, "walls", None), "supports", None)}
 
 
 def exploration_for(names=FIGURES + OPTIONAL) -> tuple[str, ...]:
@@ -63,7 +71,8 @@ def build_figures(res, exploration, names: tuple[str, ...] | None = None) -> dic
     """Every figure of the run, by name (the exploration must hold what they need); by default the
     FIGURES and, where the exploration has what they show (a lining), the OPTIONAL ones."""
     if names is None:
-        names = FIGURES + tuple(n for n in OPTIONAL if getattr(exploration, n, None) is not None)
+        names = FIGURES + tuple(n for n in OPTIONAL
+                                if (bool(HOLDS[n](exploration)) if n in HOLDS else getattr(exploration, n, None) is not None))
     unknown = [n for n in names if n not in FIGURES + OPTIONAL]
     if unknown:
         raise ValueError(f"unknown figure(s): {', '.join(unknown)} (figures: {', '.join(FIGURES + OPTIONAL)})")

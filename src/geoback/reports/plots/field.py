@@ -48,8 +48,11 @@ def field_figure(res, exploration) -> Figure:
         lining_text = f"lining '{lining.name}' ({lining.thickness:g} m, installed at stage '{installed}'), deformed"
     else:
         put = section.installed_at(case) if section.has_openings(case) else {}
+        walls = section.wall_names(case)
         shown = [mesh.band_names[i] for i in np.unique(standing[standing >= 0])]
-        lining_text = ("linings " + ", ".join(f"'{n}' (installed at '{put.get(n)}')" for n in shown) + ", deformed")
+        parts = [f"lining '{n}' (installed at '{put.get(n)}')" for n in shown if n not in walls]
+        parts += [f"wall '{n}'" + (f" (installed at '{put[n]}')" if n in put else "") for n in shown if n in walls]
+        lining_text = ", ".join(parts) + ", deformed"
     inst = []  # (block, displaced stations, displaced line or None)
     first: dict = {}
     for b in res.data.blocks:
@@ -92,8 +95,9 @@ def field_figure(res, exploration) -> Figure:
             c = colours(k % 10)
             if line is not None:
                 ax.plot(line[:, 0], line[:, 1], color=c, lw=1.6 if zoom else 1.2, path_effects=HALO)
-            ax.plot(P[:, 0], P[:, 1], ls="none", marker="o", ms=5.5 if zoom else 4, mfc=c, mec="white", mew=0.8,
-                    label=f"{block.name} ({block.kind}) stations", zorder=5)
+            ax.plot(P[:, 0], P[:, 1], ls="none", marker="s" if block.kind == "load_cell" else "o",
+                    ms=5.5 if zoom else 4, mfc=c, mec="white", mew=0.8, label=section.instrument_label(case, block),
+                    zorder=5)
         if zoom:  # arrows: direction of movement (true displacement, scaled with the colour bar)
             sel = ((mesh.nodes[:, 0] >= zx[0]) & (mesh.nodes[:, 0] <= zx[1]) & (mesh.nodes[:, 1] >= zy[0])
                    & (mesh.nodes[:, 1] <= zy[1])

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from geoback.reports.plots.common import Figure, new_figure
-from geoback.reports.forecast_report import SHOW, WHAT, positions
+from geoback.reports.forecast_report import SHOW, positions, quantity_words
 
 BAND = "#1f77b4"
 SAMPLED = "#555555"
@@ -52,8 +52,7 @@ def _profile(ax, fc, rows, pos, label, vertical: bool) -> None:
         for s in (-1, 1):
             if (s < 0 and lo.min() < 0) or (s > 0 and hi.max() > 0):
                 line(s * f * alert, color=ALERT, lw=1.0, ls=":", label="alert level")
-    q = fc.quantity[r[0]]
-    what = f"{WHAT.get(q, q)} [{unit}]"
+    what = f"{quantity_words(fc, r[0])} [{unit}]"
     if vertical:
         ax.set_xlabel(what)
         ax.set_ylabel(label)
@@ -92,7 +91,7 @@ def _spread_points(ax, fc, rows, pos, label, vertical: bool) -> None:
         err = [val - f * fc.sampled_low[rows], f * fc.sampled_high[rows] - val]
         ax.errorbar(*pair(pos, val), **({"xerr": err} if vertical else {"yerr": err}), fmt="none", color=SAMPLED,
                     capsize=3, ls="--", label=f"95 % range, {fc.draws} draws")
-    what = f"{WHAT.get(fc.quantity[rows[0]], fc.quantity[rows[0]])} [{unit}]"
+    what = f"{quantity_words(fc, rows[0])} [{unit}]"
     if vertical:
         ax.set_xlabel(what)
         ax.set_ylabel(label)
@@ -157,6 +156,62 @@ def _readings(ax, fc, rows, read, vertical: bool, label: str) -> None:
                     capsize=3, elinewidth=1.0, zorder=5, label=f"{inst} read after stage '{stage}' (± 2σ)")
 
 
+def _is_force(fc, rows) -> bool:
+    """A prop's or anchor's axial force: a support forecast, or a load cell's reading."""
+    return fc.quantity[rows[0]] == "N" and fc.kind[rows[0]] in ("support", "instrument")
+
+
+def force_readings(res, fc, name: str) -> list[tuple[str, str, float, float]]:
+    """The load-cell readings of the support a force forecast is of, at the stages before it: (load cell,
+    stage, reading, sigma), in the forecast's unit (the load cell's)."""
+    if res is None or getattr(res, "data", None) is None:
+        return []
+    rows = fc.rows(name)
+    spec = next((f for f in (res.case.forecasts or []) if f.name == name), None)
+    cells = {ins.name: ins.support for ins in res.case.instruments if ins.kind == "load_cell"}
+    if spec is None:
+        return []
+    support = getattr(spec, "support", None) or cells.get(getattr(spec, "instrument", None))
+    sigma = np.sqrt(np.clip(np.diag(res.data.covariance), 0, None))
+    out = []
+    for block, sl in res.data.block_rows():
+        if block.stage == fc.stage[rows[0]] or cells.get(block.name) != support:
+            continue
+        for i in range(sl.start, sl.stop):
+            out.append((block.name, block.stage, float(res.data.measured[i]), float(sigma[i])))
+    return out
+
+
+def _by_stage(ax, fc, rows, read, stages) -> None:
+    """A force against the construction stages: the forecast at its stage with its bands, the load-cell
+    readings so far at theirs (± 2σ)."""
+    f, unit = _scale(fc.unit[rows[0]])
+    order = list(stages)
+    i = rows[0]
+    k = order.index(fc.stage[i]) if fc.stage[i] in order else len(order) - 1
+    v = f * fc.value[i]
+    ax.errorbar([k], [v], yerr=[[v - f * fc.low[i]], [f * fc.high[i] - v]], fmt="o", ms=7, color=BAND, capsize=5,
+                label="forecast, 95 % band")
+    if fc.sampled_low is not None:
+        ax.errorbar([k + 0.08], [v], yerr=[[v - f * fc.sampled_low[i]], [f * fc.sampled_high[i] - v]], fmt="none",
+                    color=SAMPLED, capsize=3, ls="--", label=f"95 % range, {fc.draws} draws")
+    cells = list(dict.fromkeys(r[0] for r in read))
+    for inst, stage, meas, sg in read:
+        c = READ_COLOURS[cells.index(inst) % len(READ_COLOURS)]
+        first = not any(line.get_label().startswith(inst) for line in ax.lines)
+        ax.errorbar([order.index(stage)], [f * meas], yerr=[2 * f * sg], fmt="x", ms=7, mew=1.8, color=c, capsize=3,
+                    label=f"{inst} readings so far (± 2σ)" if first else None)
+    alert = fc.alert[i]
+    if np.isfinite(alert):
+        ax.axhline(f * alert, color=ALERT, lw=1.0, ls=":", label="alert level")
+    ax.set_xticks(range(len(order)), [f"after '{st}'" for st in order], rotation=20 if len(order) > 4 else 0)
+    ax.set_xlim(-0.5, len(order) - 0.5)
+    ax.set_xlabel("construction stage")
+    per = "per prop or anchor" if unit == "kN" else "per metre run of wall"
+    ax.set_ylabel(f"{quantity_words(fc, i)} {per} [{unit}]")
+    ax.axhline(0, color="0.6", lw=0.6)
+
+
 def forecast_figure(fc, name: str, res=None) -> Figure:
     """The forecast `name` with its bands; `res`: the identification it comes from, whose readings so
     far are drawn with it where they are of the same thing (None: the forecast alone)."""
@@ -173,6 +228,24 @@ def forecast_figure(fc, name: str, res=None) -> Figure:
         for ax in axes[:-1]:
             ax.set_xlabel("")
         read = []
+    elif kind == "wall":  # against depth, one panel per quantity
+        fig = new_figure(3.6 * len(quantities) + 0.8, 6.4)
+        axes = fig.subplots(1, len(quantities), sharey=True, squeeze=False)[0]
+        for ax, q in zip(axes, quantities):
+            r = np.array([i for i in rows if fc.quantity[i] == q])
+            _profile(ax, fc, r, -fc.y[r], DEPTH, vertical=True)
+        for ax in axes[1:]:
+            ax.set_ylabel("")
+        read, vertical = [], True
+    elif _is_force(fc, rows):
+        fig = Figure(figsize=(6.4, 3.8), layout="constrained")
+        ax = fig.subplots()
+        read = force_readings(res, fc, name)
+        from geoback.reports.section import stage_names
+
+        stages = stage_names(res.case) if res is not None else [fc.stage[rows[0]]]
+        _by_stage(ax, fc, rows, read, stages)
+        axes, vertical = [ax], False
     else:
         pos, label, vertical = layout(fc, rows)
         fig = new_figure(5.2, 6.4) if vertical else Figure(figsize=(6.4, 3.8))
@@ -190,16 +263,29 @@ def forecast_figure(fc, name: str, res=None) -> Figure:
         if read:
             _readings(ax, fc, rows, read, vertical, label)
         axes = [ax]
-    if kind != "lining" and vertical:  # below the panel: a profile fills its frame
+    if kind == "wall":
+        handles, labels = axes[0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="outside lower center", frameon=False, fontsize=8, ncols=2)
+    elif kind != "lining" and vertical:  # below the panel: a profile fills its frame
         fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", frameon=False, fontsize=8,
                    ncols=2)
     else:
         axes[0].legend(loc="best", frameon=False, fontsize=8)
     sub = ("\nwith the readings so far" if read else "")
-    fig.suptitle(f"Forecast '{name}' after stage '{stage}' with its 95 % band{sub}")
+    what = ""
+    if kind == "wall":
+        what = f": wall '{_spec_field(res, name, 'wall')}'" if res is not None else ""
+    elif kind == "support":
+        what = f": axial force of '{_spec_field(res, name, 'support')}'" if res is not None else ""
+    fig.suptitle(f"Forecast '{name}'{what} after stage '{stage}' with its 95 % band{sub}")
     return fig
 
 
 def forecast_figures(fc, res=None) -> dict:
     """{'forecast_<name>': Figure} for every forecast (with the readings so far from `res`)."""
     return {f"forecast_{name}": forecast_figure(fc, name, res) for name in fc.names}
+
+
+def _spec_field(res, name: str, field: str) -> str:
+    spec = next((f for f in (res.case.forecasts or []) if f.name == name), None)
+    return str(getattr(spec, field, "")) if spec is not None else ""

@@ -239,6 +239,33 @@ def _chords(ax, block, group, data, staged, stages, before) -> None:
     ax.set_xlim(0.4, m + 0.6)
 
 
+def _load_cells(ax, block, group, data, staged, stages, before) -> None:
+    """A load cell: the force of its prop or anchor [kN] (per metre run without a spacing) at each
+    construction stage it was read at, measured ± 2σ and computed."""
+    for blk, rows in group:
+        k = stages.index(blk.stage)
+        colour = STAGE_COLOURS[k % len(STAGE_COLOURS)] if staged else "#1f77b4"
+        kk = np.full(len(rows), float(k))
+        xc, sg = data.computed[rows], data.sigma[rows]
+        ax.plot(kk, xc, ls="none", marker="o", ms=7, mfc="white", mec=colour, mew=1.6, zorder=4)
+        if before is not None:
+            ax.plot(kk, before[rows], ls="none", marker="s", ms=5, color=BEFORE)
+        if data.measured is None:
+            ax.errorbar(kk, xc, yerr=2 * sg, ls="none", color="0.55", capsize=3, elinewidth=0.9, zorder=1)
+            continue
+        xm, r_ = data.measured[rows], data.residual[rows]
+        ax.errorbar(kk, xm, yerr=2 * sg, ls="none", marker="x", ms=7, mew=1.8, color=colour, capsize=4,
+                    elinewidth=1.0, zorder=3)
+        for k_, y_, rv in zip(kk, xm, r_):
+            ax.annotate(f"r′={rv:+.2f}", (k_, y_), xytext=(8, 0), textcoords="offset points", fontsize=7.5,
+                        va="center", color="#b22222" if abs(rv) > 2 else colour)
+    ax.axhline(0, color="0.7", lw=0.7, zorder=0)
+    ax.set_xticks(np.arange(len(stages)), [f"after '{st}'" for st in stages], rotation=20 if len(stages) > 3 else 0)
+    ax.set_xlim(-0.5, len(stages) - 0.5)
+    ax.set_xlabel("construction stage")
+    ax.set_ylabel("axial force in the prop or anchor [kN]\n(prop compression +, anchor tension +)")
+
+
 def _boundaries(ax, boundaries) -> None:
     """Boundaries within the panel's depth range (an instrument that does not reach one is not stretched)."""
     lims = ax.get_ylim()
@@ -266,13 +293,16 @@ def _draw(fig, data: _Readings, profiles: dict, before, boundaries, legend: list
             depth_axis = _linewise(ax, block, group, data, prof, staged, stages, before)
         elif block.kind == "points":
             depth_axis = _points(ax, block, group, data, prof, staged, stages, before)
+        elif block.kind == "load_cell":
+            depth_axis = False
+            _load_cells(ax, block, group, data, staged, stages, before)
         else:
             depth_axis = False
             _chords(ax, block, group, data, staged, stages, before)
         if depth_axis and boundaries:
             _boundaries(ax, boundaries)
         n_read = sum(len(rows) for _, rows in group)
-        title = f"{block.name} ({block.kind}, {n_read} readings" + (f" at {len(group)} stages)" if len(group) > 1
+        title = f"{block.name} ({block.kind.replace('_', ' ')}, {n_read} readings" + (f" at {len(group)} stages)" if len(group) > 1
                                                                      else ")")
         if data.residual is not None:  # the misfit of each set in the title: never over the readings
             sums = [(blk.stage, data.residual[rows]) for blk, rows in group]

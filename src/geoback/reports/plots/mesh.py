@@ -15,6 +15,7 @@ from geoback.reports.plots.common import HALO, new_figure
 
 LAYER_COLOURS = ("#e8d8b0", "#c9d9a8", "#b9cfe0", "#e3c0c0", "#d6c6e6", "#c8e0d8", "#efd9c2", "#d0d0d0")
 LINING = "#2a6f97"
+WALL = "#7f4f24"  # a retaining wall's band
 PART_COLOURS = ("#f4f4f4", "#dcdcdc", "#ececc8", "#d8e4ec", "#ead8e4")  # the ground of each part, before it is dug
 
 
@@ -35,8 +36,9 @@ def mesh_figure(mesh, case, blocks=(), name: str | None = None) -> Figure:
     if sectioned:
         for k in range(len(mesh.part_names)):
             colour[part == k] = PART_COLOURS[k % len(PART_COLOURS)]
-        for k in range(len(mesh.band_names)):
-            colour[band == k] = LINING
+        walls = section.wall_names(case)
+        for k, n in enumerate(mesh.band_names):
+            colour[band == k] = WALL if n in walls else LINING
     full_x, full_y, zx, zy, ratios = section.frames(case)
     fig = new_figure(*section.figure_size(ratios, 0.6))
     axF, axZ = fig.subplots(1, 2, width_ratios=ratios)
@@ -55,8 +57,9 @@ def mesh_figure(mesh, case, blocks=(), name: str | None = None) -> Figure:
             if b.reference is not None:  # a linewise instrument: its line from the reference end
                 L = np.vstack([b.reference, P])
                 ax.plot(L[:, 0], L[:, 1], color=marks(k % 10), lw=1.0, zorder=4)
-            ax.plot(P[:, 0], P[:, 1], ls="-" if b.kind == "convergence" else "none", marker="o",
-                    ms=5 if zoom else 3.5, color=marks(k % 10), mec="white", mew=0.6, zorder=5)
+            ax.plot(P[:, 0], P[:, 1], ls="-" if b.kind == "convergence" else "none",
+                    marker="s" if b.kind == "load_cell" else "o", ms=5 if zoom else 3.5, color=marks(k % 10),
+                    mec="white", mew=0.6, zorder=5)
         ax.set_aspect("equal")
         ax.set_xlabel(section.x_label(case))
         ax.set_ylabel("elevation y, ground surface at 0 [m]")
@@ -78,11 +81,17 @@ def mesh_figure(mesh, case, blocks=(), name: str | None = None) -> Figure:
         handles += [Patch(facecolor=PART_COLOURS[k % len(PART_COLOURS)], edgecolor="0.25",
                           label=f"'{n}', excavated at stage '{dug.get(n, 'never')}'") for k, n in enumerate(mesh.part_names)]
         put = section.installed_at(case)
-        bands = ", ".join(f"'{n}' installed at '{put.get(n, 'never')}'" for n in mesh.band_names)
+        walls = section.wall_names(case)
+        bands = ", ".join(f"'{n}' installed at '{put.get(n, 'never')}'" for n in mesh.band_names if n not in walls)
         handles += [Patch(facecolor=LINING, edgecolor="0.25", label=f"linings' bands ({bands})")] if bands else []
-        when = " (before construction: every part and lining band meshed)"
-    handles += [axF.plot([], [], ls="none", marker="o", ms=5, color=marks(k % 10), mec="white",
-                         label=f"{b.name} ({b.kind}) stations")[0] for k, b in enumerate(seen.values())]
+        handles += [Patch(facecolor=WALL, edgecolor="0.25",
+                          label=f"retaining wall '{n}' (" + (f"installed at '{put[n]}'" if n in put else
+                                                             "in place before construction") + ")")
+                    for n in mesh.band_names if n in walls]
+        when = (" (before construction: every part, lining and wall band meshed)" if walls else
+                " (before construction: every part and lining band meshed)")
+    handles += [axF.plot([], [], ls="none", marker="s" if b.kind == "load_cell" else "o", ms=5, color=marks(k % 10),
+                         mec="white", label=section.instrument_label(case, b))[0] for k, b in enumerate(seen.values())]
     fig.legend(handles=handles, loc="outside lower center", ncols=min(4, len(handles)), fontsize=8, frameon=False)
     kind = "quadratic" if mesh.order == 2 else "linear"
     dofs = 2 * len(mesh.nodes)
