@@ -42,6 +42,19 @@ def test_mohr_coulomb_ground_that_never_yields_is_the_elastic_model(kind):
     assert np.abs(a.x - b.x).max() <= 1e-8 * np.abs(b.x).max()
     for j, name in enumerate(names):
         assert np.abs(a.A[:, j] - b.A[:, j]).max() <= 1e-7 * np.abs(b.A[:, j]).max(), name
+    wa, wb = sim.wall_forces(v)["W"], elastic.wall_forces(elastic.quantities())["W"]
+    assert np.abs(wa.M - wb.M).max() <= 1e-7 * np.abs(wb.M).max()
+
+
+@pytest.mark.quick
+def test_the_walls_forces_on_yielding_ground_come_from_the_elastoplastic_solution():
+    sim = simulation(_mc(preload=120.0))
+    v = sim.quantities()
+    assert sim.solution(v).yielded.any()
+    wf = sim.wall_forces(v)["W"]
+    line = np.column_stack([np.full(len(wf.depths), 10.4), -wf.depths])
+    ux = sim.stage_displacements_at(v, line, "dig3")[:, 0]
+    assert np.abs(wf.ux[-1] - ux).max() <= 1e-12 + 1e-9 * np.abs(ux).max()
 
 
 @pytest.mark.slow
