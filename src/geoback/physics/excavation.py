@@ -280,7 +280,7 @@ class ExcavationSimulation(Simulation):
         idx = fe.free_index[dofs]
         return idx[idx >= 0]
 
-    def _factor(self, k: int, mat: np.ndarray, coeffs: np.ndarray, act: np.ndarray, on: np.ndarray, ks: np.ndarray):
+    def _factor(self, mat: np.ndarray, coeffs: np.ndarray, act: np.ndarray, on: np.ndarray, ks: np.ndarray):
         """The factorisation of the configuration (elements `mat`, connectors `on` of stiffness `ks`) and
         its scale (a configuration whose coefficients and springs are a multiple of the factorised one's
         reuses it)."""
@@ -453,7 +453,7 @@ class ExcavationSimulation(Simulation):
         coeffs = self._coeffs(mat, st)
         act = self._active(mat)
         real = np.real(coeffs)
-        fact, s = self._factor(0, mat, real, act, on, ks)
+        fact, s = self._factor(mat, real, act, on, ks)
         step_u = counted_solve(self.counters, fact, s, g[act][:, None])[:, 0]
         u[act] += step_u
         if not len(dsts):
