@@ -18,7 +18,7 @@ mesh cached, one untimed warm-up), each on a fresh simulation (nothing factorise
 Floors (issue 20): factorisations of a forward run on linear ground = configurations; least_squares /
 geoback >= 10x on linear ground, >= 5x on Mohr-Coulomb ground.
 
-    python benchmarks/walls.py [--scale 2.2] [--plastic] [--plastic-scale 1.0] [--csv out.csv]
+    python benchmarks/walls.py [--scale 3.2] [--plastic] [--plastic-scale 1.0] [--csv out.csv]
 """
 from __future__ import annotations
 
@@ -98,7 +98,7 @@ def measure(data: dict, skip_scipy: bool, label: str) -> list:
 
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scale", type=float, default=2.2, help="divide the case's element sizes by this")
+    ap.add_argument("--scale", type=float, default=3.2, help="divide the case's element sizes by this")
     ap.add_argument("--plastic", action="store_true", help="also on Mohr-Coulomb ground")
     ap.add_argument("--plastic-scale", type=float, default=1.0)
     ap.add_argument("--skip-scipy", action="store_true")

@@ -382,6 +382,13 @@ class ExcavationSimulation(Simulation):
         memo = self._memo.get("run")
         if memo is not None and memo.key[0] == key[0] and set(wrt) <= set(memo.wrt):
             return memo
+        from geoback.physics.solver import sequential_blas
+
+        with sequential_blas():
+            return self._stages(values, key, wrt)
+
+    def _stages(self, values: Mapping, key: tuple, wrt: tuple) -> _Run:
+        """The stage recursion (module docstring) at `values`, with du/dv for `wrt`."""
         fe, plan = self.fe, self.plan
         st = self._state(values)
         dsts = [self._state_derivative(values, n, st) for n in wrt]

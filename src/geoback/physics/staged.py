@@ -57,22 +57,8 @@ from geoback.physics.lining import LiningForces, RingModel
 from geoback.physics.mesh import Mesh
 from geoback.physics.names import Names
 from geoback.physics.simulation import Field, Prediction, Simulation
+from geoback.physics.solver import sequential_blas
 from geoback.physics.stiffness import FactorCache, proportion
-
-_OPENBLAS = None
-
-
-def _sequential_blas():
-    """One OpenBLAS thread for the small dense interface work (n_w ~ 100-1000): on a busy machine
-    its threads cost a hundred times the work itself (1.2 s against 120 s for a 40 x 40 objective
-    slice measured on two shared cores). MKL, which PARDISO uses, is left alone."""
-    global _OPENBLAS
-    if _OPENBLAS is None:
-        from threadpoolctl import ThreadpoolController
-
-        _OPENBLAS = ThreadpoolController().select(internal_api="openblas")
-    return _OPENBLAS.limit(limits=1)
-
 
 @dataclass
 class _Solution:
@@ -198,7 +184,7 @@ class StagedSimulation(Simulation):
 
     def stage_displacements(self, values: Mapping) -> np.ndarray:
         """u_k on the free dofs after every stage (nstages, nfree)."""
-        with _sequential_blas():
+        with sequential_blas():
             sol = self._solution(values)
         out = np.outer(sol.a[:, 0], sol.w0)
         if self.lined:
@@ -206,7 +192,7 @@ class StagedSimulation(Simulation):
         return out
 
     def _readings(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
-        with _sequential_blas():
+        with sequential_blas():
             return self._readings_of(values, wrt)
 
     def _readings_of(self, values: Mapping, wrt: Sequence[str]) -> Prediction:
@@ -329,7 +315,7 @@ class StagedSimulation(Simulation):
         """N, V, M around the lining and its centreline's movement after every stage it acts in."""
         if not self.lined:
             return None
-        with _sequential_blas():
+        with sequential_blas():
             sol = self._solution(values)
         ring = self.ring
         unit = self._ring_unit(sol)
