@@ -163,7 +163,19 @@ class Sequence:
     def describe(self) -> list[str]:
         """The construction in words, one line a stage, defaults said (what `validate` echoes)."""
         frac = self.fractions(self.values)
-        lines = []
+        lines = [f"wall '{n}' ({number_text(w.thickness)} m thick, E = {number_text(round(w.E / 1e6, 6))} GPa, from "
+                 f"{number_text(w.top)} "
+                 f"to {number_text(w.toe)} m depth at x = {number_text(w.x)}) in place from the start"
+                 for n, w in (self.walls or {}).items() if self.installed_at(n) < 0]
+
+        def named(n):
+            cn = (self.connectors or {}).get(n)
+            if cn is None:
+                return n
+            return (f"{n} ({cn.kind} on '{cn.wall}' at {number_text(-cn.head[1])} m depth to {cn.far}, "
+                    f"k = {number_text(round(cn.stiffness, 6))} kN/m/m, preload {number_text(cn.preload)} kN/m)")
+
+
         for k, st in enumerate(self.steps):
             did = []
             if st.excavate:
@@ -171,7 +183,7 @@ class Sequence:
             if st.remove:
                 did.append("removes " + ", ".join(st.remove))
             if st.install:
-                did.append("installs " + ", ".join(st.install))
+                did.append("installs " + ", ".join(named(n) for n in st.install))
             released = []
             for g in st.releases:
                 what = "its load" if self.groups[g] == k else f"the load of stage '{self.steps[self.groups[g]].name}'"

@@ -149,7 +149,7 @@ def _prop(case: Case, p, bands: dict) -> Connector:
         d = (side, 0.0)
         face = w.x + side * w.thickness / 2
         length = (p.length / 2 if p.length else abs(face)) if case.geometry.model == "half" else p.length
-        ends, far = (own,), "fixed"
+        ends, far = (own,), ("the symmetry plane" if case.geometry.model == "half" else "a fixed point")
     return Connector(p.name, "prop", p.wall, head, d, ends, far, _spring(p, length), float(p.preload), p.spacing,
                      length)
 
