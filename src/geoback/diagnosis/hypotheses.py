@@ -221,11 +221,19 @@ def _section_linings(ctx: Context) -> list[Hypothesis]:
     return out
 
 
+def _has_structures(case) -> bool:
+    """Walls, props or anchors: a section with openings whose construction has them."""
+    c = case.construction
+    return hasattr(case.geometry, "openings") and c is not None and bool(c.walls or c.props or c.anchors)
+
+
 def _walls(ctx: Context) -> list[Hypothesis]:
     """With retaining walls: each wall's modulus E[wall] the fit does not identify, free (a cracked section:
     E scales EI and EA together)."""
     from geoback.case.sequence import Sequence
 
+    if not _has_structures(ctx.case):
+        return []
     out = []
     for name in Sequence.of(ctx.case).walls or {}:
         E = f"E[{name}]"
@@ -245,6 +253,8 @@ def _supports(ctx: Context, what: str) -> list[Hypothesis]:
     where one is assumed) the fit does not identify, free."""
     from geoback.case.sequence import Sequence
 
+    if not _has_structures(ctx.case):
+        return []
     out = []
     for name, cn in (Sequence.of(ctx.case).connectors or {}).items():
         key = f"k[{name}]" if what == "stiffness" else f"preload[{name}]"
