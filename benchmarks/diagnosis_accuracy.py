@@ -154,7 +154,9 @@ def _diagnose(problem, leave: frozenset):
     if not leave:
         return diagnose(problem)
     if "exclude" in inspect.signature(diagnose).parameters:
-        return diagnose(problem, exclude=leave)
+        from geoback.diagnosis.hypotheses import KINDS as LIBRARY
+
+        return diagnose(problem, exclude=leave & set(LIBRARY))
     from geoback.diagnosis import hypotheses, yielding  # older code: the rows taken out for this call
 
     saved = hypotheses.CATALOGUE, yielding.screen
@@ -823,7 +825,7 @@ def main(argv: list[str] | None = None) -> int:
     write_csv(rows, args.out)
     text, ok = (leave_out_summary if args.leave_out else summary)(rows, seconds)
     print()
-    print(f"seed {args.seed}, {args.concealed} concealed + {args.null} null cases"
+    print(f"seed {args.seed}, {args.concealed} concealed + {0 if args.leave_out else args.null} null cases"
           + (f" + {args.staged} staged" if args.staged else "")
           + (f" + {args.yielding} yielding" if args.yielding else "")
           + f", {args.workers} workers; "
