@@ -167,7 +167,8 @@ def detectable_lambda(k: int, level: float, power: float = POWER) -> float:
 SHORT = {"stiffness-gradient": "a modulus gradient", "layer-boundary": "a stratum with another modulus",
          "lining-stiffness": "a change of the lining's modulus", "release-before-lining": "another release before the lining",
          "anisotropy": "anisotropy", "K0-gradient": "a K0 gradient", "stress-release": "a partial stress release",
-         "integration-constant": "a reference-end movement", "bias-shift": "a bias shift", "depth-offset": "a depth offset"}
+         "integration-constant": "a reference-end movement", "bias-shift": "a bias shift", "depth-offset": "a depth offset",
+         "supported-release": "a support before the full release", "yielding": "yielding"}
 ABSURD = 10.0  # a detectable size this many times the parameter's usual range is "not detectable"
 
 

@@ -301,6 +301,8 @@ CATALOGUE: tuple[Kind, ...] = (
          _release_before_lining),
     Kind("lining-stiffness", "a stiffer or softer lining than assumed", "ground", _lining_stiffness),
     Kind("yielding", "the ground yields around the tunnel (Mohr-Coulomb plastic zone)", "ground", None),
+    Kind("supported-release", "the tunnel was supported before the full release (a release fraction, then a lining)",
+         "ground", None),
     Kind("bias-shift", "an inclinometer's readings carry a constant slope offset (error growing along the casing)",
          "instrument", _bias_shift),
     Kind("depth-offset", "an inclinometer's probe was read at depths shifted from those recorded", "instrument",

@@ -56,7 +56,7 @@ from geoback.inference.identification import Identification, conclude
 from geoback.inference.misfit import Misfit
 from geoback.inference.reliability import Reliability, chi2_sf
 from geoback.physics.simulation import is_instrument_term
-from geoback.diagnosis import claims, yielding
+from geoback.diagnosis import claims, support, yielding
 from geoback.diagnosis.compare import EQUAL_AIC, akaike_weights, detectable_lambda, separation
 from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge
 from geoback.diagnosis.hypotheses import Hypothesis, candidate_hypotheses, not_applicable
@@ -325,6 +325,8 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         ranking = _best_of_groups(scored := score_hypotheses(current, cur_fit.p, hyps))
         testable = [s for s in ranking if s.collinear_with is None]
         unscored = [] if "yielding" in exclude else yielding.screen(current, cur_fit.p)  # LR refits only (yielding.py)
+        if "supported-release" not in exclude:  # the rival family of a one-step model (support.py)
+            unscored += support.propose(current, cur_fit.p)
         threshold = alpha / max(len(testable) + len(unscored), 1)
         _detectable(ranking, scored, threshold)
         # adequate: the omnibus chi^2 test passes (readings of known sigma), every estimated error
@@ -359,7 +361,8 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             s.refit, s.reliability = fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
             compare(s, s.J0, 0)
             judge(s)
-        for y in (yielding.refit(h, current, cur_fit, settings, method, say) for h in unscored):
+        for y in ((support if h.kind == "supported-release" else yielding).refit(h, current, cur_fit, settings,
+                                                                                 method, say) for h in unscored):
             if y is not None:
                 judge(y)
                 ranking.append(y)

@@ -94,7 +94,7 @@ class Round:
     def tests(self) -> int:
         """Score tests in the Bonferroni family: one per row of the ranking that can be tested (a
         layer boundary's depths are one test, Bonferroni within it)."""
-        return sum(1 for s in self.ranking if s.collinear_with is None and s.hypothesis.kind != "yielding")
+        return sum(1 for s in self.ranking if s.collinear_with is None and s.hypothesis.kind not in SCREENED)
 
     @property
     def family(self) -> int:
@@ -114,11 +114,13 @@ class Round:
         text = f"{alpha:g} / {self.family}: {self.tests} score test{'s' if self.tests != 1 else ''} (one per row"
         text += "".join(f"; {w}" for w in inner) + ")"
         if self.screened:
-            text += f" and {self.screened} hypothesis screened and refitted instead (yielding)"
+            text += (f" and {self.screened} hypothes{'es' if self.screened > 1 else 'is'} screened and refitted "
+                     f"instead (no score test: yielding, a support before the full release)")
         return text
 
 
 NO_ADDITION = "(no addition)"
+SCREENED = frozenset({"yielding", "supported-release"})  # kinds tested by a refit only, no score test
 
 # The grades of a verdict (issue 24): a cause that passes its claim checks is named; one that improves
 # the fit but fails a check (or has a rival of another family within the evidence) is explained but not
