@@ -63,7 +63,7 @@ BOUND_WORDS = "at its search bound; not determined"
 
 def _check_words(s) -> str:
     """The claim checks an accepted cause failed, in words."""
-    return "; ".join(c.text for c in s.checks.values() if not c.passed)
+    return "; ".join(c.text for c in s.checks.values() if not c.passed and c.name != "rivals")  # rivals: own words
 
 
 def _rival_words(d, s) -> str:
@@ -108,7 +108,9 @@ def _accepted_words(d, s) -> str:
     est = "; ".join(one(*e) for e in d.estimates(s))
     prof = d.depth_profile(s)
     title = s.hypothesis.title
-    if prof is not None:
+    if prof is not None and s.grade == "explained":
+        title = f"a different stratum in '{prof.layer}' below about {prof.z_hat:.3g} m"
+    elif prof is not None:
         title = f"a different stratum in '{prof.layer}' below {prof.z_hat:.3g} m (95 % {prof.interval_text()})"
     elif s.hypothesis.extra_values and s.hypothesis.kind != "layer-boundary":
         title += " at " + ", ".join(f"{k} = {v:g} m" for k, v in s.hypothesis.extra_values.items())
