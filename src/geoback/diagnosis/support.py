@@ -17,7 +17,8 @@ is refitted whenever the model is not adequate and tested by likelihood ratio (n
 beta = 1: the chi^2(1) reference is conservative), in the same Bonferroni family.
 
 Proposed only for a circular tunnel without a construction section, without a release parameter
-already (``stress-release``'s beta) and with linear-elastic ground.
+already (``stress-release``'s beta), with linear-elastic ground and no inclinometer read at a depth
+offset (the staged simulation does not read them).
 """
 from __future__ import annotations
 
@@ -40,6 +41,8 @@ def propose(misfit, p_hat) -> list[Hypothesis]:
             or any(n == "beta" or n.startswith("beta[") for n in misfit.parameters.names)
             or any(getattr(ly, "model", "linear-elastic") != "linear-elastic" for ly in case.ground.layers)):
         return []
+    if any(n.startswith("zoff[") for n in misfit.parameters.names) or sim.survey.offsets(misfit.values(p_hat)):
+        return []  # the staged simulation does not read inclinometers at depth offsets
     t = round(min(MAX_THICKNESS, 0.1 * case.geometry.radius), 3)
     return [Hypothesis(
         "supported-release", "supported-release", "the tunnel was supported before the full release",
