@@ -104,7 +104,6 @@ def refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], set
     sim = current.simulation
     case = sim.loaded.case
     lo_z, hi_z = _layer_range(case, layer)
-    E0 = float(current.values(cur_fit.p)[f"E[{layer}]"])
     J0 = lr_objective(current, cur_fit)
     template = group[0]
 

@@ -24,9 +24,11 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    t the centred station index) and runs of one sign (Wald-Wolfowitz, normal approximation), each
    N(0, 1) under the model (conservative: fitted residuals have less variance), Bonferroni over the
    tests and instruments at the diagnosis' alpha.
-3. Rivals of other families (``rivals``): a refit of another family (results.FAMILIES) that is
-   significant too and whose AIC is within RIVAL_AIC of the accepted one's explains the readings
-   within the evidence: both are listed with the readings that separate them (compare.separation).
+3. Rivals of other families (``rivals``): a refit of another family (results.FAMILIES) that improves
+   on the model it extends and whose quasi-AIC is within RIVAL_AIC of the accepted one's (the AIC
+   difference divided by the overdispersion chi^2/dof the accepted refit leaves, when above 1)
+   explains the readings within the evidence: both are listed with the readings that separate them
+   (compare.separation).
 4. Determined: every extra parameter determined by the readings and off its search bounds.
 """
 from __future__ import annotations
@@ -160,17 +162,32 @@ def residual_structure(misfit: Misfit, p: np.ndarray, alpha: float) -> Check:
                                              f"{level:.2g} per test)", {"instruments": per, "level": level})
 
 
-def rivals(acc, refitted: list, threshold: float) -> list:
-    """Check 3's rivals: significant refits of another family within RIVAL_AIC of the accepted one."""
-    return sorted((s for s in refitted if s is not acc and s.settled and s.family != acc.family
-                   and s.p_lr < threshold and np.isfinite(s.aic) and s.aic - acc.aic < RIVAL_AIC),
-                  key=lambda s: s.aic)
+def overdispersion(acc) -> float:
+    """c = chi^2 / dof of the accepted refit, at least 1: the misfit it leaves beyond the stated errors."""
+    rel = acc.reliability
+    c = float(getattr(rel, "reduced_chi2", float("nan")))
+    return c if np.isfinite(c) and c > 1.0 else 1.0
+
+
+def rivals(acc, refitted: list, threshold: float = float("nan")) -> list:
+    """Check 3's rivals: refits of another family that improve on the model they extend and come within
+    RIVAL_AIC of the accepted one in quasi-AIC (Burnham & Anderson 2002, sec. 2.5: the AIC difference
+    divided by the overdispersion c = chi^2/dof the accepted refit leaves, when above 1): two models that
+    both leave the readings unexplained beyond their errors are not told apart by a difference of that
+    misfit's own size. Whether the rival is significant on its own does not matter: an accepted cause
+    only just significant is not singled out from a rival nearly as good."""
+    c = overdispersion(acc)
+    return sorted((s for s in refitted if s is not acc and s.settled and s.family != acc.family and s.dJ > 0
+                   and np.isfinite(s.aic) and (s.aic - acc.aic) / c < RIVAL_AIC), key=lambda s: s.aic)
 
 
 def rival_check(acc, found: list) -> Check:
+    c = overdispersion(acc)
+    scaled = f" (differences divided by the χ²/dof {c:.3g} its refit leaves)" if c > 1 else ""
     if not found:
-        return Check("rivals", True, f"no refit of another family comes within {RIVAL_AIC:.3g} AIC")
-    names = "; ".join(f"{s.hypothesis.title} (ΔAIC {s.aic - acc.aic:+.2g})" for s in found)
+        return Check("rivals", True, f"no refit of another family comes within {RIVAL_AIC:.3g} AIC{scaled}",
+                     {"overdispersion": c})
+    names = "; ".join(f"{s.hypothesis.title} (ΔAIC {s.aic - acc.aic:+.2g})" for s in found) + scaled
     return Check("rivals", False, f"another family explains the readings within the evidence: {names}",
                  {"rivals": [s.hypothesis.key for s in found]})
 

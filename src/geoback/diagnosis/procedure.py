@@ -61,7 +61,7 @@ from geoback.diagnosis.compare import EQUAL_AIC, akaike_weights, detectable_lamb
 from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge
 from geoback.diagnosis.hypotheses import Hypothesis, candidate_hypotheses, not_applicable
 from geoback.diagnosis.boundary import boundary_interval, refit_layer_boundary, reprofile_boundary
-from geoback.diagnosis.results import NO_ADDITION, Diagnosis, Mismatch, Round, Scored, settled  # noqa: F401 (Mismatch: re-exported)
+from geoback.diagnosis.results import NO_ADDITION, Diagnosis, Mismatch, Round, Scored  # noqa: F401 (Mismatch: re-exported)
 
 COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mimic
 
@@ -429,7 +429,7 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, say) -> None:
     say(f"claim checks of {acc.hypothesis.title}: cross-validation across instruments")
     acc.checks["determined"] = claims.determined_check(acc)
     acc.checks["cross-validation"] = claims.cross_validation(current, cur_fit.p, acc.misfit, acc.refit.p)
-    acc.rivals = claims.rivals(acc, [s for s in rnd.ranking if s.refit is not None], rnd.threshold)
+    acc.rivals = claims.rivals(acc, [s for s in rnd.ranking if s.refit is not None])
     acc.checks["rivals"] = claims.rival_check(acc, acc.rivals)
     if acc.rivals and (rnd.rival is None or rnd.rival.family == acc.family):
         rnd.rival = acc.rivals[0]
