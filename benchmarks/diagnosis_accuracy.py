@@ -123,7 +123,7 @@ FLOOR_ACCURACY, FLOOR_FALSE_ALARMS = 0.90, 0.05
 COLUMNS = ["case", "kind", "parameter", "magnitude", "effect_size", "raw_movement", "named", "correct",
            "cause", "named_cause", "accepted", "tentative", "estimate", "covered", "rival", "round1", "p_before",
            "chi2dof_before", "chi2dof_after", "top_score_kind", "readings", "seconds", "R", "axis_depth", "E", "nu",
-           "K0", "layout", "noise_seed", "grade", "left_out", "error"]
+           "K0", "layout", "noise_seed", "grade", "left_out", "adequate_after", "error"]
 
 
 def family_of(kind: str) -> str:
@@ -510,6 +510,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         row["accepted"] = " + ".join(s.hypothesis.key for s in d.accepted)
         row["correct"] = (named == "nothing") if spec["kind"] in NULL_KINDS else (named == spec["kind"])
         row["grade"] = grade_of(d.accepted[0]) if d.accepted else "nothing"
+        row["adequate_after"] = bool(d.adequate_after)
         if d.accepted:
             s = d.accepted[0]
             row["tentative"] = not s.determined
@@ -678,6 +679,16 @@ def summary(rows: list[dict], seconds: float) -> tuple[str, bool]:
     else:
         ok = False
         out.append(f"correct names, effect size > {THRESHOLD:g}: no such case")
+    if n:  # issue 24's grades: a right kind that is only 'explained but not singled out' is not named
+        named_right = sum(bool(r["correct"]) and r["grade"] == "named" for r in big)
+        wrong_named = sum(not r["correct"] and r["grade"] == "named" for r in big)
+        out.append(f"  of which named (grade 'named', claim checks passed): {named_right}/{n} = "
+                   f"{100 * named_right / n:.1f} %; a wrong kind named: {wrong_named}/{n}")
+        for kind in ALL_KINDS:
+            sub = [r for r in big if r["kind"] == kind]
+            if sub:
+                out.append(f"    {kind:<22} right {sum(bool(r['correct']) for r in sub)}/{len(sub)}, named right "
+                           f"{sum(bool(r['correct']) and r['grade'] == 'named' for r in sub)}/{len(sub)}")
     acc_r, k_r, n_r = rate(raw)
     out.append(f"correct names, raw movement > {THRESHOLD:g} sigma: {k_r}/{n_r} = {100 * acc_r:.1f} %")
     for lo, hi in ((0, 3), (3, 5), (5, 10), (10, 30), (30, math.inf)):
@@ -702,6 +713,9 @@ def summary(rows: list[dict], seconds: float) -> tuple[str, bool]:
         out.append(f"false alarms on null cases:        {fa}/{len(nulls)} = {100 * p:.1f} % ± {100 * se:.1f} % "
                    f"(binomial s.e.{extra}; floor <= {100 * FLOOR_FALSE_ALARMS:.0f} %: "
                    f"{'PASS' if passed else 'FAIL'})")
+        named_fa = sum(r["grade"] == "named" for r in nulls)
+        out.append(f"  of which a cause named (grade 'named'): {named_fa}/{len(nulls)}; inadequate after: "
+                   f"{sum(r['adequate_after'] is False for r in nulls)}/{len(nulls)}")
     errors = [r for r in rows if r["error"]]
     if errors:
         ok = False
@@ -817,7 +831,7 @@ def main(argv: list[str] | None = None) -> int:
                 mark = "ok " if r["correct"] else "WRONG"
                 secs = r["seconds"] if isinstance(r["seconds"], float) else float("nan")
                 print(f"[{len(rows):3d}/{len(specs)}] {r['case']:<34} {r['parameter']:<20} {_fmt(r['magnitude']):>9}  "
-                      f"effect {eff:7.2f}  raw {raw:7.2f}  -> {r['named']:<20} {mark} {secs:5.1f} s"
+                      f"effect {eff:7.2f}  raw {raw:7.2f}  -> {r['named']:<20} {r['grade'] or '':<9} {mark} {secs:5.1f} s"
                       + (f"  {r['error']}" if r["error"] else ""), flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)

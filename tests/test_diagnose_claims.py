@@ -165,3 +165,23 @@ def test_a_supported_tunnel_modelled_in_one_step_is_not_named_a_stratum(bench, t
         assert js["grade"] == "explained but not singled out"
         assert all(e["ci95"] is None for e in js["missing"][0]["estimates"].values())
         assert js["missing"][0]["rivals"][0]["kind"] == "supported-release"
+
+
+def test_a_score_test_alone_never_makes_a_model_inadequate(bench, tmp_path, monkeypatch):
+    """A null case of the accuracy benchmark (bench-063: noise only) whose chi^2 passes but whose K0-gradient
+    score test is below the level: with no round left to refit it (max_rounds=0) the model is adequate,
+    the score test a linear approximation no refit confirmed."""
+    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
+    from geoback.inference.identification import prepare
+    from geoback.inference.synthetic import synthetic_readings
+
+    spec = bench.random_case(63, "null", 2024)
+    loaded = LoadedCase(case_from_data(copy.deepcopy(spec["data"])), tmp_path / "null.yaml", {})
+    problem = prepare(loaded, with_readings=False)
+    clean = synthetic_readings(loaded, refine=2.0)
+    problem = problem.with_readings(bench._stack(bench._with_noise(clean, loaded, spec["noise_seed"]), problem))
+    d = diagnose(problem, max_rounds=0)
+    r = d.rounds[0]
+    assert r.p_value >= d.alpha
+    assert min(s.p_score for s in r.ranking if s.collinear_with is None) < r.threshold  # a score test fires
+    assert r.adequate and d.adequate_after and not d.accepted and d.grade == "none"

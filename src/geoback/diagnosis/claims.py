@@ -36,11 +36,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
 
 from geoback.inference.misfit import Misfit
 
-RIVAL_AIC = float(stats.chi2.isf(0.01, 1))  # 6.63: a rival is rejected only by this much AIC (1 % level, 1 dof)
+RIVAL_AIC = 10.0  # a rival is dismissed only this far behind: 'essentially no support' (Burnham & Anderson
+# 2002, sec. 2.6: Delta_i > 10; within 4-7 a model has 'considerably less' support, not none)
 FLOOR = 1e-8  # relative eigenvalue of the scaled information below which a direction is not informed
 
 

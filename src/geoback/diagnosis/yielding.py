@@ -23,7 +23,14 @@ so it cannot rank the hypothesis. Yielding is therefore tested as a likelihood r
    starting from c_crit / MARGIN - the elastic stresses exceed that strength by MARGIN at the
    wall, a small plastic zone from which the fit can grow or shrink it (c' up to 2 c_crit: an
    elastic ground again) - and from half that (a wider zone), keeping the better fit.
-3. The likelihood-ratio test dJ ~ chi^2(1) as for the other refits, in the same Bonferroni family.
+   A refit that stalls (c' walked to the elastic end of its range, or no better than the elastic
+   fit) is started once more from CONTINUATION times the screen's start (a wider zone still).
+   Where the readings determine c', phi' is freed too (from PHI, within PHI_RANGE) from the c'
+   refit's optimum, and that refit is kept when its AIC is lower and both are determined (the
+   readings of a tunnel mostly tell the strength at the wall's confinement; where they also tell
+   phi', holding it at 30 deg biased c' and gave intervals that never held the truth, issue 24).
+3. The likelihood-ratio test dJ ~ chi^2(1) (chi^2(2) with phi' freed) as for the other refits, in
+   the same Bonferroni family.
    The null (c' at or above c_crit, every point elastic) lies on the boundary of the parameter
    space, where the statistic is a 50:50 mixture of 0 and chi^2(1): the chi^2(1) reference is
    conservative.
