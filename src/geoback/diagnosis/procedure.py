@@ -16,9 +16,20 @@
    profiled over a continuous depth (``depth.py``). Hypotheses that no score test can rank
    (yielding: at an elastic state every sensitivity to the strength is zero; ``yielding.py``) are
    screened instead and refitted whenever the model is not adequate, in the same Bonferroni family.
+   Every refit starts from the base model's optimum with the extension at its null value (a layer
+   boundary's split mesh: also from a neighbouring depth's optimum, whichever is lower), and a refit
+   that ends above the model it extends is no improvement (``refit.compare``: 'worse'). Hypotheses
+   no score test can rank are screened and refitted: yielding (``yielding.py``) and, for a one-step
+   unlined model, a support before the full release (``support.py``).
 5. Compare (``compare.py``): Akaike weights of the refitted hypotheses and of the model without
    them; a rival within 2 AIC of the accepted one is reported with the readings that would tell
    them apart; the size of effect each score test could have detected.
+   The accepted hypothesis is then tested as a claim (``claims.py``): determined and off its search
+   bounds, predicting each instrument left out better than the model without it, no rival of another
+   family within 10 quasi-AIC, and (after the final joint fit) no structure left in any instrument's
+   residuals. A cause that passes is *named*; one that fails is *explained but not singled out*
+   (``results.GRADES``). The last round's score tests, with no refit left to confirm them, never
+   make the model inadequate: a score test alone is a linear approximation.
 6. Report every accepted parameter from the final joint fit (profile-likelihood intervals where
    the linearised ones are not reliable); a boundary depth accepted before another effect is
    profiled again in the final model.
