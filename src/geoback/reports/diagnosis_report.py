@@ -112,7 +112,7 @@ def _accepted_words(d, s) -> str:
         title = f"a different stratum in '{prof.layer}' below about {prof.z_hat:.3g} m"
     elif prof is not None:
         title = f"a different stratum in '{prof.layer}' below {prof.z_hat:.3g} m (95 % {prof.interval_text()})"
-    elif s.hypothesis.extra_values and s.hypothesis.kind != "layer-boundary":
+    elif s.hypothesis.extra_values and s.hypothesis.kind not in ("layer-boundary", "supported-release"):
         title += " at " + ", ".join(f"{k} = {v:g} m" for k, v in s.hypothesis.extra_values.items())
     text = f"{title}: {est}"
     if s.grade == "explained":
