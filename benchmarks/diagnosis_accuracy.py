@@ -65,7 +65,8 @@ boundary's depth (profile likelihood), n, K0grad, B[I1], beta, bias[I1], zoff[I1
 
 Leave-one-family-out (--leave-out): every concealed case (effects from the upper half of each kind's
 range, as the coverage study draws them) is diagnosed with its truth's FAMILY removed from the library
-(FAMILIES: the release kinds are one family, every other kind its own), so the library cannot hold the
+(FAMILIES, as diagnosis/results.py has them: the release kinds are one family, a modulus gradient and a
+stratum another, every other kind its own), so the library cannot hold the
 truth: whatever is *named* is a confident wrong cause. Printed: per kind, the cases with effect size
 > 3 and how many were named (grade 'named': the verdict passed its claim checks; a library without
 grades names every accepted hypothesis that is not tentative), explained but not singled out, or
@@ -117,13 +118,14 @@ NULL_KINDS = ("null", "null-staged")  # nothing concealed (an unlined / a staged
 ALL_KINDS = KINDS + STAGED_KINDS + YIELDING_KINDS
 THRESHOLD = 3.0  # sigma
 # --leave-out: a family is what is removed from the library with a truth kind (release kinds are one)
-FAMILIES = {"stress-release": "release", "release-before-lining": "release", "supported-release": "release"}
+FAMILIES = {"stress-release": "release", "release-before-lining": "release", "supported-release": "release",
+            "stiffness-gradient": "stiffness-with-depth", "layer-boundary": "stiffness-with-depth"}
 FLOOR_CONFIDENT_WRONG = 0.05
 FLOOR_ACCURACY, FLOOR_FALSE_ALARMS = 0.90, 0.05
 COLUMNS = ["case", "kind", "parameter", "magnitude", "effect_size", "raw_movement", "named", "correct",
            "cause", "named_cause", "accepted", "tentative", "estimate", "covered", "rival", "round1", "p_before",
            "chi2dof_before", "chi2dof_after", "top_score_kind", "readings", "seconds", "R", "axis_depth", "E", "nu",
-           "K0", "layout", "noise_seed", "grade", "left_out", "adequate_after", "error"]
+           "K0", "layout", "noise_seed", "grade", "failed_checks", "left_out", "adequate_after", "error"]
 
 
 def family_of(kind: str) -> str:
@@ -510,6 +512,9 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         row["accepted"] = " + ".join(s.hypothesis.key for s in d.accepted)
         row["correct"] = (named == "nothing") if spec["kind"] in NULL_KINDS else (named == spec["kind"])
         row["grade"] = grade_of(d.accepted[0]) if d.accepted else "nothing"
+        row["failed_checks"] = " ".join(f"{c.name}" + (f"({' '.join(c.detail.get('rivals', []))})" if c.name == "rivals"
+                                                       else "") for s in d.accepted
+                                        for c in getattr(s, "checks", {}).values() if not c.passed)
         row["adequate_after"] = bool(d.adequate_after)
         if d.accepted:
             s = d.accepted[0]

@@ -23,10 +23,11 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    tested for a mean (sum / sqrt(m)), a linear trend along the instrument (sum t_j w_j / ||t||,
    t the centred station index) and runs of one sign (Wald-Wolfowitz, normal approximation), each
    N(0, 1) under the model (conservative: fitted residuals have less variance), Bonferroni over the
-   tests and instruments at the diagnosis' alpha.
+   tests and instruments at STRUCTURE_ALPHA (1 %).
 3. Rivals of other families (``rivals``): a refit of another family (results.FAMILIES) that improves
    on the model it extends and whose quasi-AIC is within RIVAL_AIC of the accepted one's (the AIC
-   difference divided by the overdispersion chi^2/dof the accepted refit leaves, when above 1)
+   difference divided by the overdispersion chi^2/dof the accepted refit leaves, where its chi^2 test
+   fails)
    explains the readings within the evidence: both are listed with the readings that separate them
    (compare.separation).
 4. Determined: every extra parameter determined by the readings and off its search bounds.
@@ -40,6 +41,9 @@ from scipy import special
 
 from geoback.inference.misfit import Misfit
 
+STRUCTURE_ALPHA = 0.01  # family-wise level of the residual-structure tests: a check that downgrades a cause
+# the likelihood ratio accepted must be a strong finding itself (the baseline mesh's own error leaves mild
+# structure in precise readings: trends of 3 sigma in surface settlements of correctly named cases)
 RIVAL_AIC = 10.0  # a rival is dismissed only this far behind: 'essentially no support' (Burnham & Anderson
 # 2002, sec. 2.6: Delta_i > 10; within 4-7 a model has 'considerably less' support, not none)
 FLOOR = 1e-8  # relative eigenvalue of the scaled information below which a direction is not informed
@@ -135,8 +139,9 @@ def _runs_z(w: np.ndarray) -> float:
 MIN_READINGS = 5  # an instrument with fewer readings is not tested for structure
 
 
-def residual_structure(misfit: Misfit, p: np.ndarray, alpha: float) -> Check:
-    """Check 2: each instrument's whitened residuals after the fit tested for a mean, a trend and runs."""
+def residual_structure(misfit: Misfit, p: np.ndarray, alpha: float = STRUCTURE_ALPHA) -> Check:
+    """Check 2: each instrument's whitened residuals after the fit tested for a mean, a trend and runs
+    (family-wise level `alpha`, Bonferroni over the tests)."""
     ev = misfit.evaluate(np.asarray(p, float))
     r = np.asarray(ev.r, float)
     rows = {k: v for k, v in _instrument_rows(misfit.data).items() if len(v) >= MIN_READINGS}
@@ -163,17 +168,19 @@ def residual_structure(misfit: Misfit, p: np.ndarray, alpha: float) -> Check:
                                              f"{level:.2g} per test)", {"instruments": per, "level": level})
 
 
-def overdispersion(acc) -> float:
-    """c = chi^2 / dof of the accepted refit, at least 1: the misfit it leaves beyond the stated errors."""
+def overdispersion(acc, alpha: float = 0.05) -> float:
+    """c = chi^2 / dof of the accepted refit where its chi^2 test fails (the misfit it leaves beyond the
+    stated errors), else 1."""
     rel = acc.reliability
     c = float(getattr(rel, "reduced_chi2", float("nan")))
-    return c if np.isfinite(c) and c > 1.0 else 1.0
+    p = float(getattr(rel, "p_value", 1.0))
+    return c if np.isfinite(c) and c > 1.0 and p < alpha else 1.0
 
 
 def rivals(acc, refitted: list, threshold: float = float("nan")) -> list:
     """Check 3's rivals: refits of another family that improve on the model they extend and come within
     RIVAL_AIC of the accepted one in quasi-AIC (Burnham & Anderson 2002, sec. 2.5: the AIC difference
-    divided by the overdispersion c = chi^2/dof the accepted refit leaves, when above 1): two models that
+    divided by the overdispersion c = chi^2/dof the accepted refit leaves, where its chi^2 test fails): two models that
     both leave the readings unexplained beyond their errors are not told apart by a difference of that
     misfit's own size. Whether the rival is significant on its own does not matter: an accepted cause
     only just significant is not singled out from a rival nearly as good."""

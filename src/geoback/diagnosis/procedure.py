@@ -402,7 +402,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         cur_fit = fit(current, settings, method=method, p0=cur_fit.p)
     if accepted:  # what a true cause leaves behind: no structure in any instrument's residuals
         say("claim checks: residual structure after the final joint fit")
-        left = claims.residual_structure(current, cur_fit.p, alpha)
+        left = claims.residual_structure(current, cur_fit.p, min(alpha, claims.STRUCTURE_ALPHA))
         for s in accepted:
             s.checks["residual-structure"] = left
             s.grade = claims.grade(s.checks)

@@ -127,9 +127,11 @@ SCREENED = frozenset({"yielding", "supported-release"})  # kinds tested by a ref
 # singled out; with nothing accepted, no effect the library can detect.
 GRADES = {"named": "named", "explained": "explained but not singled out",
           "none": "no effect the library can detect"}
-# Families: what a rival must differ in. The release kinds are one family (a release fraction with or
-# without a support); every other kind is its own.
-FAMILIES = {"stress-release": "release", "release-before-lining": "release", "supported-release": "release"}
+# Families: what a rival must differ in to make a cause not singled out. The release kinds are one family
+# (a release fraction, with or without a support); a modulus gradient and a stratum are one (the ground
+# stiffer or softer with depth: linear or in a step, told apart by AIC as before); every other kind is its own.
+FAMILIES = {"stress-release": "release", "release-before-lining": "release", "supported-release": "release",
+            "stiffness-gradient": "stiffness-with-depth", "layer-boundary": "stiffness-with-depth"}
 
 
 def family_of(kind: str) -> str:
