@@ -314,6 +314,9 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
              alpha: float = typer.Option(0.05, help="significance level of the adequacy and hypothesis tests, "
                                          "between 0 and 1"),
              plots: bool = typer.Option(True, help="write the before/after figure"),
+             exclude: Optional[list[str]] = typer.Option(None, "--exclude", help="a kind of the library not to "
+                                                         "propose (what the case knows is not so), e.g. "
+                                                         "layer-boundary; repeat for several"),
              quiet: bool = typer.Option(False, "--quiet", "-q"),
              as_json: bool = _json_option(),
              allow_large: bool = _allow_large(),
@@ -326,13 +329,18 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
 
     if not 0.0 < alpha < 1.0:  # (nan fails too) checked again by the library; here before any work
         raise GeobackError(f"--alpha: expected a significance level between 0 and 1 (e.g. 0.05), found {alpha:g}")
+    from geoback.diagnosis.hypotheses import KINDS
+
+    unknown = [k for k in exclude or [] if k not in KINDS]
+    if unknown:
+        raise GeobackError(f"--exclude: expected a kind of the library ({', '.join(KINDS)}), found '{unknown[0]}'")
     say = None if quiet else _say
     limit = _limited(time_limit, say)
     out = _check_out(out)
     loaded = _load(case, allow_large)
     folder = _out_dir(loaded, out)
     with limit:
-        d = run_diagnosis(loaded, alpha=alpha, progress=say)
+        d = run_diagnosis(loaded, alpha=alpha, progress=say, exclude=exclude or ())
         exploration = explore(d.final_misfit, d.final, ("profiles",)) if plots else None
         write_diagnosis(d, folder, plots=plots, exploration=exploration)
         if as_json:

@@ -11,6 +11,8 @@ parameter:
   estimate, and ``c[layer]`` among the parameters;
 - the release before the lining (``beta[stage]``): the stage's ``release`` set to the estimate, and
   the parameter; the lining's modulus: ``construction.lining.E``, and the parameter;
+- a support before the full release (``support.py``): the construction section of the staged model
+  (a release before the assumed lining, the rest after it), and ``beta[advance]``;
 - every other extension (a modulus gradient ``Egrad[layer]``, anisotropy ``n[layer]``, ``K0grad``,
   ``beta``) and every instrument error (``B[I1]``, ``bias[I1]``, ``zoff[I1]``): its named parameter,
   which ``inference.parameters.resolve`` accepts in a case's ``parameters:``.
@@ -94,6 +96,8 @@ def amended_case(d, folder: Path) -> tuple[dict, str]:
     data["ground"]["layers"] = layers
     # the construction plan: releases and the lining's modulus at their estimates
     construction = data.get("construction")
+    if not construction and final_case.construction is not None:  # an accepted support (support.py)
+        construction = data["construction"] = final_case.construction.model_dump(mode="json", exclude_none=True)
     if construction:
         for stage in construction.get("stages", []):
             name = f"beta[{stage.get('name')}]"

@@ -9,7 +9,7 @@ from geoback.case.loading import Parameter
 from geoback.inference.estimate import Fit, Settings
 from geoback.inference.misfit import Misfit
 from geoback.diagnosis.depth import DepthProfile, profile_depth
-from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge, lr_objective
+from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge, lr_objective, null_start
 from geoback.diagnosis.hypotheses import Hypothesis
 from geoback.diagnosis.results import Round, Scored
 
@@ -17,10 +17,29 @@ DEPTH_SEEDS = 7  # layer-boundary depths refitted evenly over a layer before bis
 LOSING = 50.0  # J units: a boundary whose best seed depth is this far above another refit is not refined
 
 
+LAYER_EXTENSIONS = ("Egrad", "n", "m")  # per-layer extensions a split's lower layer inherits
+
+
+def inherited(current: Misfit, p_hat: np.ndarray, layer: str) -> dict:
+    """The per-layer extensions the current model gives `layer` (a gradient, anisotropy), as fixed
+    values of the lower part of a split: with them, the split at its null modulus is the current model."""
+    values = current.values(p_hat)
+    return {f"{stem}[{layer}_below]": float(values[f"{stem}[{layer}]"]) for stem in LAYER_EXTENSIONS
+            if f"{stem}[{layer}]" in values}
+
+
+def null_modulus(current: Misfit, p_hat: np.ndarray, layer: str, z: float, top: float) -> float:
+    """The modulus of `layer` at depth z in the current model (with its gradient if it has one): the
+    lower part's null value, where the split equals the current model."""
+    values = current.values(p_hat)
+    return float(values[f"E[{layer}]"] + values.get(f"Egrad[{layer}]", 0.0) * (z - top))
+
+
 def _split_layer_misfit(current: Misfit, case, loaded, layer: str, z: float, p_hat: np.ndarray,
                         E_below: float) -> Misfit:
     """The current model with layer `layer` split at depth z into two meshed layers (conforming
-    boundary) and the lower layer's modulus identified (starting from E_below, the others from p_hat)."""
+    boundary) and the lower layer's modulus identified (starting from E_below, the others from p_hat);
+    the lower layer keeps the per-layer extensions the current model gives the layer (``inherited``)."""
     from geoback.physics.factory import make_simulation
 
     layers = list(case.ground.layers)
@@ -32,7 +51,16 @@ def _split_layer_misfit(current: Misfit, case, loaded, layer: str, z: float, p_h
                           blocks=list(current.data.blocks))
     E_ref = float(current.values(p_hat)[f"E[{layer}]"])
     spec = Parameter(name=f"E[{layer}_below]", initial=float(E_below), bounds=(E_ref / 50, E_ref * 50))
-    return current.extended([spec], simulation=sim, start=p_hat)
+    return current.extended([spec], values=inherited(current, p_hat, layer), simulation=sim, start=p_hat)
+
+
+def _objective_at(misfit: Misfit, p: np.ndarray) -> float:
+    """What a likelihood ratio compares (``refit.lr_objective``) at a point, not at a fit."""
+    try:
+        ev = misfit.evaluate(p)
+    except Exception:  # noqa: BLE001 - no null objective: the base's J0 is compared
+        return float("nan")
+    return float(ev.support) if misfit.free else float(ev.J)
 
 
 def _moved_boundary_misfit(misfit: Misfit, below: str, z: float, start: np.ndarray) -> Misfit:
@@ -76,17 +104,20 @@ def refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], set
     sim = current.simulation
     case = sim.loaded.case
     lo_z, hi_z = _layer_range(case, layer)
-    E0 = float(current.values(cur_fit.p)[f"E[{layer}]"])
     J0 = lr_objective(current, cur_fit)
     template = group[0]
 
     def refit_at(z: float, near: Scored | None) -> Scored:
-        start, E_start = (cur_fit.p, E0) if near is None else (near.refit.p[:-1], float(near.refit.p[-1]))
-        misfit = _split_layer_misfit(current, case, sim.loaded, layer, z, start, E_start)
-        t = Scored(_boundary_hypothesis(template.hypothesis, layer, z, E0), template.score, template.dof,
+        # the null start (the current optimum, the lower part at the layer's modulus there: the current
+        # model on the split mesh) and a neighbouring depth's optimum; the fit starts from the lower
+        E_null = null_modulus(current, cur_fit.p, layer, z, lo_z)
+        misfit = _split_layer_misfit(current, case, sim.loaded, layer, z, cur_fit.p, E_null)
+        null = null_start(misfit)
+        starts = [null] if near is None else [null, np.concatenate([near.refit.p[:-1], near.refit.p[-1:]])]
+        t = Scored(_boundary_hypothesis(template.hypothesis, layer, z, E_null), template.score, template.dof,
                    template.p_score, misfit=misfit)
-        t.refit, t.reliability = fit_and_assess(misfit, settings, method, REFIT_ITERATIONS)
-        compare(t, J0, 1)
+        t.refit, t.reliability = fit_and_assess(misfit, settings, method, REFIT_ITERATIONS, starts=starts)
+        compare(t, J0, 1, J_null=_objective_at(misfit, null))
         return t
 
     # the score is a linear approximation that can overrate deep boundaries: besides the three

@@ -169,7 +169,8 @@ SHORT = {"stiffness-gradient": "a modulus gradient", "layer-boundary": "a stratu
          "anisotropy": "anisotropy", "K0-gradient": "a K0 gradient", "stress-release": "a partial stress release",
          "integration-constant": "a reference-end movement", "bias-shift": "a bias shift", "depth-offset": "a depth offset",
          "wall-stiffness": "a change of the wall's modulus", "support-stiffness": "a change of a support's stiffness",
-         "preload-lost": "another preload"}
+         "preload-lost": "another preload", "supported-release": "a support before the full release",
+         "yielding": "yielding"}
 ABSURD = 10.0  # a detectable size this many times the parameter's usual range is "not detectable"
 
 

@@ -361,6 +361,8 @@ CATALOGUE: tuple[Kind, ...] = (
     Kind("preload-lost", "a prop's preload or an anchor's lock-off load not as assumed", "ground",
          lambda ctx: _supports(ctx, "preload")),
     Kind("yielding", "the ground yields around the tunnel (Mohr-Coulomb plastic zone)", "ground", None),
+    Kind("supported-release", "the tunnel was supported before the full release (a release fraction, then a lining)",
+         "ground", None),
     Kind("bias-shift", "an inclinometer's readings carry a constant slope offset (error growing along the casing)",
          "instrument", _bias_shift),
     Kind("depth-offset", "an inclinometer's probe was read at depths shifted from those recorded", "instrument",

@@ -16,9 +16,20 @@
    profiled over a continuous depth (``depth.py``). Hypotheses that no score test can rank
    (yielding: at an elastic state every sensitivity to the strength is zero; ``yielding.py``) are
    screened instead and refitted whenever the model is not adequate, in the same Bonferroni family.
+   Every refit starts from the base model's optimum with the extension at its null value (a layer
+   boundary's split mesh: also from a neighbouring depth's optimum, whichever is lower), and a refit
+   that ends above the model it extends is no improvement (``refit.compare``: 'worse'). Hypotheses
+   no score test can rank are screened and refitted: yielding (``yielding.py``) and, for a one-step
+   unlined model, a support before the full release (``support.py``).
 5. Compare (``compare.py``): Akaike weights of the refitted hypotheses and of the model without
    them; a rival within 2 AIC of the accepted one is reported with the readings that would tell
    them apart; the size of effect each score test could have detected.
+   The accepted hypothesis is then tested as a claim (``claims.py``): determined and off its search
+   bounds, predicting each instrument left out better than the model without it, no rival of another
+   family within 10 quasi-AIC, and (after the final joint fit) no structure left in any instrument's
+   residuals. A cause that passes is *named*; one that fails is *explained but not singled out*
+   (``results.GRADES``). The last round's score tests, with no refit left to confirm them, never
+   make the model inadequate: a score test alone is a linear approximation.
 6. Report every accepted parameter from the final joint fit (profile-likelihood intervals where
    the linearised ones are not reliable); a boundary depth accepted before another effect is
    profiled again in the final model.
@@ -56,12 +67,12 @@ from geoback.inference.identification import Identification, conclude
 from geoback.inference.misfit import Misfit
 from geoback.inference.reliability import Reliability, chi2_sf
 from geoback.physics.simulation import is_instrument_term
-from geoback.diagnosis import yielding
+from geoback.diagnosis import claims, support, yielding
 from geoback.diagnosis.compare import EQUAL_AIC, akaike_weights, detectable_lambda, separation
 from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge
 from geoback.diagnosis.hypotheses import Hypothesis, candidate_hypotheses, not_applicable
 from geoback.diagnosis.boundary import boundary_interval, refit_layer_boundary, reprofile_boundary
-from geoback.diagnosis.results import NO_ADDITION, Diagnosis, Mismatch, Round, Scored, settled  # noqa: F401 (Mismatch: re-exported)
+from geoback.diagnosis.results import NO_ADDITION, Diagnosis, Mismatch, Round, Scored  # noqa: F401 (Mismatch: re-exported)
 
 COLLINEAR = 1e-6  # relative norm of the part of a column the baseline cannot mimic
 
@@ -278,8 +289,10 @@ def _detectable(ranking: list[Scored], scored: list[Scored], threshold: float) -
 
 
 def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4, method: str = "lm",
-             progress=None) -> Diagnosis:
-    """Find what the model is missing (see the module docstring). case: a LoadedCase or an Analysis."""
+             progress=None, exclude=()) -> Diagnosis:
+    """Find what the model is missing (see the module docstring). case: a LoadedCase or an Analysis.
+    exclude: kinds of the catalogue (``hypotheses.KINDS``) not to propose (what the case knows is not
+    so; the leave-one-family-out benchmark)."""
     import time
 
     from geoback.inference.identification import Analysis, prepare
@@ -293,6 +306,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             from geoback.errors import GeobackError
 
             raise GeobackError(f"{name}: expected a whole number of at least {least}, found {value!r}")
+    exclude = _excluded(exclude)
     t_start = time.perf_counter()
     analysis = case if isinstance(case, Analysis) else prepare(case)
     if analysis.misfit is None:
@@ -318,11 +332,13 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             rounds.append(Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, [], None, True,
                                 scales=cur_rel.error_scales, scale_threshold=scale_level))
             break
-        hyps = [h for h in candidate_hypotheses(current, cur_fit.p) if _modelled(current, h)]
+        hyps = [h for h in candidate_hypotheses(current, cur_fit.p) if _modelled(current, h) and h.kind not in exclude]
         say(scoring_words(hyps))
         ranking = _best_of_groups(scored := score_hypotheses(current, cur_fit.p, hyps))
         testable = [s for s in ranking if s.collinear_with is None]
-        unscored = yielding.screen(current, cur_fit.p)  # likelihood-ratio refits only (yielding.py)
+        unscored = [] if "yielding" in exclude else yielding.screen(current, cur_fit.p)  # LR refits only (yielding.py)
+        if "supported-release" not in exclude:  # the rival family of a one-step model (support.py)
+            unscored += support.propose(current, cur_fit.p)
         threshold = alpha / max(len(testable) + len(unscored), 1)
         _detectable(ranking, scored, threshold)
         # adequate: the omnibus chi^2 test passes (readings of known sigma), every estimated error
@@ -333,7 +349,10 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         rnd = Round(cur_rel.chi2, cur_rel.dof, cur_rel.p_value, mismatches, ranking, None, adequate, threshold,
                     cur_rel.error_scales, scale_level, hypotheses=len(hyps), screened=len(unscored))
         rounds.append(rnd)
-        if adequate or k == max_rounds:
+        if k == max_rounds:  # no refit left to confirm a score test: a score test alone never makes a
+            rnd.adequate = chi2_ok and scales_ok  # model inadequate (it is a linear approximation)
+            break
+        if adequate:
             break
         chosen = testable[:refit_top]  # the plain hypotheses first: a searched depth that cannot beat them
         for s in sorted(chosen, key=lambda t: bool(t.hypothesis.group)):  # is not searched in detail
@@ -354,11 +373,12 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             s.refit, s.reliability = fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
             compare(s, s.J0, 0)
             judge(s)
-        for y in (yielding.refit(h, current, cur_fit, settings, method, say) for h in unscored):
+        for y in ((support if h.kind == "supported-release" else yielding).refit(h, current, cur_fit, settings,
+                                                                                 method, say) for h in unscored):
             if y is not None:
                 judge(y)
                 ranking.append(y)
-        significant = [s for s in ranking if s.refit is not None and s.p_lr < threshold and settled(s.refit)]
+        significant = [s for s in ranking if s.p_lr < threshold and s.settled]  # never one worse than its base
         rnd.accepted, rnd.tentative = _choose(significant)
         if rnd.accepted is not None and rnd.accepted.profile is not None:
             boundary_interval(rnd, say)
@@ -366,6 +386,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         if rnd.accepted is None:
             rnd.adequate = chi2_ok and scales_ok  # nothing in the library does better
             break
+        _claim_checks(rnd, current, cur_fit, say)
         accepted.append(rnd.accepted)
         current, cur_fit, cur_rel = rnd.accepted.misfit, rnd.accepted.refit, rnd.accepted.reliability
     final_profiles = {}
@@ -380,6 +401,12 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     if accepted:  # the refits stop at REFIT_ITERATIONS or when J stalls: the final model fitted as `run` fits it
         say("final joint fit")
         cur_fit = fit(current, settings, method=method, p0=cur_fit.p)
+    if accepted:  # what a true cause leaves behind: no structure in any instrument's residuals
+        say("claim checks: residual structure after the final joint fit")
+        left = claims.residual_structure(current, cur_fit.p, min(alpha, claims.STRUCTURE_ALPHA))
+        for s in accepted:
+            s.checks["residual-structure"] = left
+            s.grade = claims.grade(s.checks)
     say("final joint fit: intervals")
     extended = current.simulation.loaded  # the case with the accepted extensions (a split layer) if any
     final = conclude(current, cur_fit, extended.case, extended.digest(), {}, {}, settings=settings)
@@ -387,6 +414,39 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     return Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
                      time.perf_counter() - t_start, intervals, analysis.loaded, method,
                      not_applicable(analysis.case))
+
+
+def _excluded(exclude) -> frozenset:
+    """The kinds `diagnose` is asked not to propose, checked against the catalogue."""
+    from geoback.diagnosis.hypotheses import KINDS
+
+    if isinstance(exclude, str):
+        exclude = [exclude]
+    out = frozenset(exclude or ())
+    unknown = sorted(out - set(KINDS))
+    if unknown:
+        from geoback.errors import GeobackError
+
+        raise GeobackError(f"exclude: expected kinds of the library ({', '.join(KINDS)}), found "
+                           f"{', '.join(map(repr, unknown))}")
+    return out
+
+
+def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, say) -> None:
+    """The accepted hypothesis of a round tested as a claim (``claims.py``): determined and off its
+    bounds, predicting each instrument left out better than the model without it, no rival of another
+    family within the evidence (listed with the readings that separate them). Residual structure is
+    tested after the final joint fit; the grade is given then."""
+    acc = rnd.accepted
+    say(f"claim checks of {acc.hypothesis.title}: cross-validation across instruments")
+    acc.checks["determined"] = claims.determined_check(acc)
+    acc.checks["cross-validation"] = claims.cross_validation(current, cur_fit.p, acc.misfit, acc.refit.p)
+    acc.rivals = claims.rivals(acc, [s for s in rnd.ranking if s.refit is not None])
+    acc.checks["rivals"] = claims.rival_check(acc, acc.rivals)
+    if acc.rivals and (rnd.rival is None or rnd.rival.family == acc.family):
+        rnd.rival = acc.rivals[0]
+        rnd.separation = separation(acc, rnd.rival, current.data)
+    acc.grade = claims.grade(acc.checks)
 
 
 def scoring_words(hyps: list[Hypothesis]) -> str:

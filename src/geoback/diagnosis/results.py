@@ -48,10 +48,20 @@ class Scored:
     weight: float = float("nan")  # Akaike weight in its round
     group_size: int = 1  # hypotheses of its group (a layer boundary's depths): p_score is Bonferroni over them
     p_single: float = float("nan")  # the score test's p of this one hypothesis (before the group's Bonferroni)
+    worse: bool = False  # the refit ended above the model it extends: no improvement (refit.compare)
+    at_bound: dict = field(default_factory=dict)  # extra parameter -> 'lower' | 'upper': left on a search bound
+    grade: str = ""  # an accepted hypothesis: 'named' or 'explained' (GRADES; claims.py)
+    checks: dict = field(default_factory=dict)  # the claim checks: name -> claims.Check
+    rivals: list = field(default_factory=list)  # refits of other families that explain the readings as well
 
     @property
     def settled(self) -> bool:
-        return self.refit is not None and settled(self.refit)
+        """Refitted, converged (or stalled) and no worse than the model it extends."""
+        return self.refit is not None and settled(self.refit) and not self.worse
+
+    @property
+    def family(self) -> str:
+        return family_of(self.hypothesis.kind)
 
     def tested_as(self, other: "Scored") -> "Scored":
         """This refit takes the score test of `other` (the row of its group it replaces): p, the
@@ -84,7 +94,7 @@ class Round:
     def tests(self) -> int:
         """Score tests in the Bonferroni family: one per row of the ranking that can be tested (a
         layer boundary's depths are one test, Bonferroni within it)."""
-        return sum(1 for s in self.ranking if s.collinear_with is None and s.hypothesis.kind != "yielding")
+        return sum(1 for s in self.ranking if s.collinear_with is None and s.hypothesis.kind not in SCREENED)
 
     @property
     def family(self) -> int:
@@ -104,11 +114,28 @@ class Round:
         text = f"{alpha:g} / {self.family}: {self.tests} score test{'s' if self.tests != 1 else ''} (one per row"
         text += "".join(f"; {w}" for w in inner) + ")"
         if self.screened:
-            text += f" and {self.screened} hypothesis screened and refitted instead (yielding)"
+            text += (f" and {self.screened} hypothes{'es' if self.screened > 1 else 'is'} screened and refitted "
+                     f"instead (no score test: yielding, a support before the full release)")
         return text
 
 
 NO_ADDITION = "(no addition)"
+SCREENED = frozenset({"yielding", "supported-release"})  # kinds tested by a refit only, no score test
+
+# The grades of a verdict (issue 24): a cause that passes its claim checks is named; one that improves
+# the fit but fails a check (or has a rival of another family within the evidence) is explained but not
+# singled out; with nothing accepted, no effect the library can detect.
+GRADES = {"named": "named", "explained": "explained but not singled out",
+          "none": "no effect the library can detect"}
+# Families: what a rival must differ in to make a cause not singled out. The release kinds are one family
+# (a release fraction, with or without a support); a modulus gradient and a stratum are one (the ground
+# stiffer or softer with depth: linear or in a step, told apart by AIC as before); every other kind is its own.
+FAMILIES = {"stress-release": "release", "release-before-lining": "release", "supported-release": "release",
+            "stiffness-gradient": "stiffness-with-depth", "layer-boundary": "stiffness-with-depth"}
+
+
+def family_of(kind: str) -> str:
+    return FAMILIES.get(kind, kind)
 
 
 @dataclass
@@ -188,6 +215,25 @@ class Diagnosis:
     def depth_profile(self, s: Scored) -> DepthProfile | None:
         """The depth profile of an accepted boundary in the final model (or its round's)."""
         return self.final_profiles.get(s.hypothesis.key, s.profile)
+
+    @property
+    def grade(self) -> str:
+        """'named' when every accepted cause passed its claim checks, 'explained' when one did not,
+        'none' with nothing accepted (GRADES gives the words)."""
+        if not self.accepted:
+            return "none"
+        return "named" if all(s.grade == "named" for s in self.accepted) else "explained"
+
+    def bound_of(self, name: str) -> str | None:
+        """'lower' / 'upper' when the final joint fit left parameter `name` on a search bound."""
+        params = self.final.parameters
+        if name not in params.names:
+            return None
+        i = params.names.index(name)
+        if not bool(self.final_fit.at_bound[i]):
+            return None
+        p = self.final_fit.p[i]
+        return "lower" if abs(p - params.lower[i]) <= abs(p - params.upper[i]) else "upper"
 
     @property
     def causes(self) -> dict[str, list[Scored]]:

@@ -23,7 +23,14 @@ so it cannot rank the hypothesis. Yielding is therefore tested as a likelihood r
    starting from c_crit / MARGIN - the elastic stresses exceed that strength by MARGIN at the
    wall, a small plastic zone from which the fit can grow or shrink it (c' up to 2 c_crit: an
    elastic ground again) - and from half that (a wider zone), keeping the better fit.
-3. The likelihood-ratio test dJ ~ chi^2(1) as for the other refits, in the same Bonferroni family.
+   A refit that stalls (c' walked to the elastic end of its range, or no better than the elastic
+   fit) is started once more from CONTINUATION times the screen's start (a wider zone still).
+   Where the readings determine c', phi' is freed too (from PHI, within PHI_RANGE) from the c'
+   refit's optimum, and that refit is kept when its AIC is lower and both are determined (the
+   readings of a tunnel mostly tell the strength at the wall's confinement; where they also tell
+   phi', holding it at 30 deg biased c' and gave intervals that never held the truth, issue 24).
+3. The likelihood-ratio test dJ ~ chi^2(1) (chi^2(2) with phi' freed) as for the other refits, in
+   the same Bonferroni family.
    The null (c' at or above c_crit, every point elastic) lies on the boundary of the parameter
    space, where the statistic is a 50:50 mixture of 0 and chi^2(1): the chi^2(1) reference is
    conservative.
@@ -43,7 +50,7 @@ import numpy as np
 from geoback.case.loading import Parameter
 from geoback.errors import ForwardFailure
 from geoback.physics.extensions import EXTENSIONS
-from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, lr_objective
+from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge, lr_objective
 from geoback.diagnosis.results import Scored
 from geoback.diagnosis.hypotheses import Hypothesis
 
@@ -144,38 +151,99 @@ def refit(h: Hypothesis, current, cur_fit, settings, method: str, say):
     """The baseline with the hypothesis' layer made mohr-coulomb, fitted; a procedure.Scored with its
     likelihood-ratio test (score and its p-value are NaN: there is none), or None if the yielding
     model cannot be solved from its start."""
+    spec = h.parameters[0]
+    best = None
+    for factor in START_FACTORS:  # the better of the starts (a wider zone first: see START_FACTORS)
+        s = _fit_from(h, current, cur_fit, settings, method, say, spec.initial * factor)
+        if s is not None and (best is None or s.refit.J < best.refit.J):
+            best = s
+    if best is None:
+        return None
+    J0 = lr_objective(current, cur_fit)
+    compare(best, J0, 0)
+    if _stalled(best):  # a continuation start: a wider zone still, from which the fit can shrink it
+        say(f"  the refit stalled (c' {best.refit.p[-1]:.3g} kPa, at the elastic end or no better than the "
+            f"elastic fit): again from a wider plastic zone")
+        again = _fit_from(h, current, cur_fit, settings, method, say, spec.initial * CONTINUATION)
+        if again is not None:
+            compare(again, J0, 0)
+            if again.refit.J < best.refit.J:
+                best = again
+    if best.settled and best.dJ > 0:  # the friction angle freed where the cohesion is determined
+        judge(best)
+        if best.determined:
+            free = _fit_phi(h, best, current, settings, method, say)
+            if free is not None:
+                compare(free, J0, 0)
+                judge(free)
+                if free.settled and free.determined and free.aic < best.aic:
+                    best = free
+    return best
+
+
+CONTINUATION = 0.2  # the continuation start's cohesion, a fraction of the screen's start
+PHI_RANGE = (15.0, 45.0)  # degrees: the friction angle's search range when it is freed
+
+
+def _stalled(s: Scored) -> bool:
+    """A refit that walked c' to the elastic end of its range (every gradient in c' zero there) or
+    ended no better than the elastic fit."""
+    spec = s.hypothesis.parameters[0]
+    c = float(s.refit.p[-1])
+    return (not s.settled) or s.dJ <= 0 or c >= 0.98 * spec.bounds[1]
+
+
+def _mohr_coulomb_misfit(h, current, cur_fit, c0: float, specs: list, start: np.ndarray):
+    """The current model with the hypothesis' layer made mohr-coulomb (c0, PHI, PSI), `specs` identified."""
     from geoback.physics.plastic import PlasticSimulation
 
     sim = current.simulation
     loaded = sim.loaded
     layer = h.key[len("yielding["):-1]
-    spec = h.parameters[0]
-    best = None
-    for factor in START_FACTORS:  # the better of the starts (a wider zone first: see START_FACTORS)
-        c0 = spec.initial * factor
-        layers = [ly.model_copy(update={"model": "mohr-coulomb", "c": c0, "phi": PHI, "psi": PSI})
-                  if ly.name == layer else ly for ly in loaded.case.ground.layers]
-        case = loaded.case.model_copy(update={"ground": loaded.case.ground.model_copy(update={"layers": layers})})
-        say(f"refitting with {h.title} (c' from {c0:.3g} kPa, phi' = {PHI:g} deg)")
-        s = Scored(h, float("nan"), len(h.parameters), float("nan"))
-        try:
-            if hasattr(case.geometry, "openings"):  # yielding ground with openings (the factory's row for it)
-                from geoback.physics.factory import make_simulation
+    layers = [ly.model_copy(update={"model": "mohr-coulomb", "c": c0, "phi": PHI, "psi": PSI})
+              if ly.name == layer else ly for ly in loaded.case.ground.layers]
+    case = loaded.case.model_copy(update={"ground": loaded.case.ground.model_copy(update={"layers": layers})})
+    if hasattr(case.geometry, "openings"):  # yielding ground with openings (the factory's row for it)
+        from geoback.physics.factory import make_simulation
 
-                plastic = make_simulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
-                                          backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
-            else:
-                plastic = PlasticSimulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
-                                            backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
-            s.misfit = current.extended([spec.model_copy(update={"initial": c0})], simulation=plastic,
-                                        start=cur_fit.p)
-            s.refit, s.reliability = fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
-        except ForwardFailure as exc:
-            say(f"  not refitted from c' = {c0:.3g} kPa: {exc}")
-            continue
-        if best is None or s.refit.J < best.refit.J:
-            best = s
-    if best is None:
+        plastic = make_simulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
+                                  backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
+    else:
+        plastic = PlasticSimulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
+                                    backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
+    return current.extended(specs, simulation=plastic, start=start)
+
+
+def _fit_from(h, current, cur_fit, settings, method, say, c0: float) -> Scored | None:
+    spec = h.parameters[0]
+    say(f"refitting with {h.title} (c' from {c0:.3g} kPa, phi' = {PHI:g} deg)")
+    s = Scored(h, float("nan"), len(h.parameters), float("nan"))
+    try:
+        s.misfit = _mohr_coulomb_misfit(h, current, cur_fit, c0, [spec.model_copy(update={"initial": c0})], cur_fit.p)
+        s.refit, s.reliability = fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
+    except ForwardFailure as exc:
+        say(f"  not refitted from c' = {c0:.3g} kPa: {exc}")
         return None
-    compare(best, lr_objective(current, cur_fit), 0)
-    return best
+    return s
+
+
+def _fit_phi(h, best: Scored, current, settings, method, say) -> Scored | None:
+    """The refit with phi' free too, from the c' refit's optimum (phi' = PHI): the readings of a tunnel
+    mostly tell the strength at the wall's confinement, and with c' determined they may tell phi'."""
+    layer = h.key[len("yielding["):-1]
+    c_hat = float(best.refit.p[-1])
+    spec = h.parameters[0]
+    phi = Parameter(name=f"phi[{layer}]", initial=PHI, bounds=PHI_RANGE)
+    h2 = Hypothesis(h.key, h.kind, h.title.replace(f"phi' = {PHI:g} deg and ", ""),
+                    h.description.replace(f"phi' = {PHI:g} deg and psi = {PSI:g} deg fixed, c' identified",
+                                          f"c' and phi' identified, psi = {PSI:g} deg fixed"),
+                    [spec.model_copy(update={"initial": c_hat}), phi], dict(h.extra_values), h.group)
+    say(f"refitting with {h2.title} (phi' freed from {PHI:g} deg, c' from {c_hat:.3g} kPa)")
+    s = Scored(h2, float("nan"), 2, float("nan"))
+    try:
+        s.misfit = _mohr_coulomb_misfit(h2, current, None, c_hat, h2.parameters, best.refit.p[:-1])
+        s.refit, s.reliability = fit_and_assess(s.misfit, settings, method, REFIT_ITERATIONS)
+    except ForwardFailure as exc:
+        say(f"  phi' not freed: {exc}")
+        return None
+    return s

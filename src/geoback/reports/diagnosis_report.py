@@ -11,6 +11,7 @@ from geoback.reports.resultsets import result_set
 from geoback.diagnosis.compare import detectable_text, unit_of
 from geoback.diagnosis.hypotheses import CAUSES, KINDS
 from geoback.diagnosis.procedure import NO_ADDITION
+from geoback.diagnosis.results import GRADES
 from geoback.units import display, interval_text, pm_text, value_text
 from geoback.diagnosis.amend import AMENDED, amended_text
 
@@ -52,8 +53,31 @@ def _estimates(s) -> list[tuple[str, float, float, float, float]]:
     out = []
     for name in s.hypothesis.names:
         i = rel.names.index(name)
-        out.append((name, f.p[i], rel.std[i], records[i].low, records[i].high))
+        lo, hi = (float("nan"), float("nan")) if name in s.at_bound else (records[i].low, records[i].high)
+        out.append((name, f.p[i], rel.std[i], lo, hi))
     return out
+
+
+BOUND_WORDS = "at its search bound; not determined"
+
+
+def _check_words(s) -> str:
+    """The claim checks an accepted cause failed, in words."""
+    return "; ".join(c.text for c in s.checks.values() if not c.passed and c.name != "rivals")  # rivals: own words
+
+
+def _rival_words(d, s) -> str:
+    """The rivals of other families of an accepted cause, with what would tell them apart."""
+    if not s.rivals:
+        return ""
+    rnd = next((r for r in d.rounds if r.accepted is s), None)
+    names = " or ".join(f"{r.hypothesis.title} ({CAUSES[r.hypothesis.cause]}, ΔAIC {r.aic - s.aic:+.2g})"
+                        for r in s.rivals)
+    sep = ""
+    if rnd is not None and rnd.separation is not None and rnd.rival in s.rivals:
+        sep = rnd.separation.text(s.hypothesis.title, rnd.rival.hypothesis.title)
+    return (f"it is not singled out from {names}" + (f"; what would tell them apart: {sep}" if sep else "")
+            + "; `geoback design --separate` ranks candidate instruments for it")
 
 
 def _unit(params, name: str) -> str:
@@ -66,6 +90,10 @@ def _accepted_words(d, s) -> str:
 
     def one(n, v, sd, lo, hi):
         unit = _unit(params, n)
+        if d.bound_of(n) or n in s.at_bound:
+            return f"{n} = {value_text(n, unit, v)} ({BOUND_WORDS})"
+        if s.grade == "explained":  # not found: no interval as if it were
+            return f"{n} = {value_text(n, unit, v)} if it were the cause (no interval: not singled out)"
         lo_open, hi_open = d.open_ends(n)
         if not (np.isfinite(lo) and np.isfinite(hi)):
             reason = d.final.interval(n).reason if n in params.names else ""
@@ -80,11 +108,16 @@ def _accepted_words(d, s) -> str:
     est = "; ".join(one(*e) for e in d.estimates(s))
     prof = d.depth_profile(s)
     title = s.hypothesis.title
-    if prof is not None:
+    if prof is not None and s.grade == "explained":
+        title = f"a different stratum in '{prof.layer}' below about {prof.z_hat:.3g} m"
+    elif prof is not None:
         title = f"a different stratum in '{prof.layer}' below {prof.z_hat:.3g} m (95 % {prof.interval_text()})"
-    elif s.hypothesis.extra_values and s.hypothesis.kind != "layer-boundary":
+    elif s.hypothesis.extra_values and s.hypothesis.kind not in ("layer-boundary", "supported-release"):
         title += " at " + ", ".join(f"{k} = {v:g} m" for k, v in s.hypothesis.extra_values.items())
     text = f"{title}: {est}"
+    if s.grade == "explained":
+        why = "; ".join(w for w in (_check_words(s), _rival_words(d, s)) if w)
+        return f"{title} - EXPLAINED BUT NOT SINGLED OUT ({why}): {est}"
     if not s.determined:
         why = sorted({"it ended at a bound of its search" if c.code == "at-bound" else "its uncertainty is as large "
                       "as the value itself" for c in s.caveats})
@@ -149,9 +182,12 @@ def verdict(d) -> str:
     if not d.accepted:
         catch = detectable_sentence(d)
         return (f"The model does not explain the readings ({_fit_line(b.chi2, b.dof, b.p_value)}), but none of the "
-                f"hypotheses in the library improves the fit significantly. Check the readings and their stated "
+                f"hypotheses in the library improves the fit significantly: no effect the library can detect. Check the "
+                f"readings and their stated "
                 f"errors, or the geometry." + (f" {catch}" if catch else ""))
     c = d.causes
+    if d.grade == "explained":
+        return _explained_verdict(d)
     parts = []
     for cause in ("instrument", "ground"):
         if c[cause]:
@@ -166,6 +202,23 @@ def verdict(d) -> str:
         "both" if c["instrument"] and c["ground"] else ("instrument" if c["instrument"] else "ground")]
     numbers = " (numbers from the final joint fit)" if len(d.accepted) > 1 else ""
     return (f"{lead} Missing{numbers} - " + " ".join(parts) + " " + " ".join(rival_sentences(d))
+            + f" Fit before: {_fit_line(b.chi2, b.dof, b.p_value)}; after: {_fit_line(f.chi2, f.dof, f.p_value)}"
+              f" - {state}.").replace("  ", " ")
+
+
+def _explained_verdict(d) -> str:
+    """The verdict when an accepted cause failed a claim check: what improves the fit, why it is not
+    singled out, and what it would take."""
+    b, f = d.baseline_reliability, d.final_reliability
+    named = [s for s in d.accepted if s.grade == "named"]
+    lead = ("The readings are explained but the cause is not singled out: the library's best explanation "
+            "improves the fit but does not pass every check a true cause passes.")
+    parts = [f"{_cap(CAUSES[s.hypothesis.cause])}: " + _accepted_words(d, s) + "." for s in d.accepted]
+    tail = (" Named: " + ", ".join(s.hypothesis.title for s in named) + "." if named else
+            " No cause is named; read the fit's improvement as where the model and the readings differ, not as "
+            "what the ground is.")
+    state = "adequate" if d.adequate_after else "still not adequate"
+    return (f"{lead} " + " ".join(parts) + tail
             + f" Fit before: {_fit_line(b.chi2, b.dof, b.p_value)}; after: {_fit_line(f.chi2, f.dof, f.p_value)}"
               f" - {state}.").replace("  ", " ")
 
@@ -208,8 +261,12 @@ def diagnosis_text(d) -> str:
                         est += f" ({s.profile.text()})"
                     elif s.hypothesis.extra_values:
                         est += " (" + ", ".join(f"{k2} = {v:g} m" for k2, v in s.hypothesis.extra_values.items()) + ")"
-                    if not s.determined:
+                    if s.at_bound:
+                        est += f" **{BOUND_WORDS}**"
+                    elif not s.determined:
                         est += " **not determined**"
+                    if s.worse:
+                        est += " **worse than the model it extends: no improvement**"
                 fmt = (lambda v: f"{v:.4g}" if np.isfinite(v) else "-")
                 p_cell = fmt(s.p_score)
                 if s.group_size > 1 and np.isfinite(s.p_single):
@@ -222,8 +279,12 @@ def diagnosis_text(d) -> str:
                               f"({NO_ADDITION}: {rnd.weights.get(NO_ADDITION, 0.0):.2g})."]
         if rnd.accepted is not None:
             tent = " (tentative: a parameter is not determined)" if rnd.tentative else ""
-            lines += ["", f"Accepted{tent}: **{rnd.accepted.hypothesis.title}** ({CAUSES[rnd.accepted.hypothesis.cause]})"
-                          f" - {rnd.accepted.hypothesis.description}"]
+            acc = rnd.accepted
+            lines += ["", f"Accepted{tent}: **{acc.hypothesis.title}** ({CAUSES[acc.hypothesis.cause]})"
+                          f" - {acc.hypothesis.description}"]
+            if acc.checks:
+                lines += ["", f"Claim checks ({GRADES[acc.grade] if acc.grade else 'not graded'}):"]
+                lines += [f"- {c.name}: {'passes' if c.passed else 'FAILS'} - {c.text}" for c in acc.checks.values()]
             if rnd.rival is not None:
                 lines += ["", next((t for t in rival_sentences(_One(d, rnd))), "")]
         else:
@@ -327,21 +388,37 @@ def _item(d, s, final: bool) -> dict:
             "extra_values": s.hypothesis.extra_values,
             "detectable": s.detectable}
     if s.refit is not None:
-        item.update(dJ=s.dJ, p_lr=s.p_lr, aic=s.aic, bic=s.bic, akaike_weight=s.weight, status=s.refit.status,
-                    determined=s.determined, caveats=[c.as_dict() for c in s.caveats],
+        status = s.refit.status if not s.worse else "worse than the model it extends"
+        item.update(dJ=s.dJ, p_lr=s.p_lr, aic=s.aic, bic=s.bic, akaike_weight=s.weight, status=status,
+                    improves=not s.worse, determined=s.determined and not s.at_bound,
+                    caveats=[c.as_dict() for c in s.caveats],
                     estimates={n: {"estimate": v, "std": sd, "unit": unit_of(s, n),
-                                   "ci95": [lo, hi] if np.isfinite(lo) and np.isfinite(hi) else None}
+                                   "ci95": [lo, hi] if np.isfinite(lo) and np.isfinite(hi) else None,
+                                   **({"at_bound": s.at_bound[n], "note": BOUND_WORDS} if n in s.at_bound else {})}
                                for n, v, sd, lo, hi in _estimates(s)})
         if s.profile is not None:
             item["depth"] = s.profile.as_dict()
     if final:  # an accepted hypothesis: its parameters from the final joint fit
         item["estimates_in_round"] = item.pop("estimates", {})
-        item["estimates"] = {n: {"estimate": v, "std": sd, "unit": _unit(d.final.parameters, n),
-                                 "ci95": [lo, hi] if np.isfinite(lo) and np.isfinite(hi) else None,
-                                 "from": "final joint fit",
-                                 "interval": ("profile likelihood" if (n in d.final_intervals or n in d.final.profiled)
-                                              else "linearised"), "ci95_open": list(d.open_ends(n))}
-                             for n, v, sd, lo, hi in d.estimates(s)}
+
+        def entry(n, v, sd, lo, hi):
+            bound = d.bound_of(n) or s.at_bound.get(n)
+            shown = np.isfinite(lo) and np.isfinite(hi) and not bound and s.grade != "explained"
+            e = {"estimate": v, "std": sd, "unit": _unit(d.final.parameters, n), "ci95": [lo, hi] if shown else None,
+                 "from": "final joint fit",
+                 "interval": ("profile likelihood" if (n in d.final_intervals or n in d.final.profiled)
+                              else "linearised"), "ci95_open": list(d.open_ends(n))}
+            if bound:
+                e.update(at_bound=bound, note=BOUND_WORDS)
+            elif s.grade == "explained":
+                e["note"] = "explained but not singled out: no interval as if it were found"
+            return e
+
+        item["estimates"] = {e[0]: entry(*e) for e in d.estimates(s)}
+        item["grade"] = GRADES.get(s.grade, s.grade)
+        item["checks"] = {k: c.as_dict() for k, c in s.checks.items()}
+        item["rivals"] = [{"key": r.hypothesis.key, "kind": r.hypothesis.kind, "title": r.hypothesis.title,
+                           "cause": CAUSES[r.hypothesis.cause], "dAIC": r.aic - s.aic} for r in s.rivals]
         prof = d.depth_profile(s)
         if prof is not None:
             item["depth"] = prof.as_dict()
@@ -356,7 +433,7 @@ def diagnosis_json(d) -> dict:
     lo, hi = d.final.intervals95()
     c = d.causes
     return {
-        "case": d.case, "alpha": d.alpha, "verdict": verdict(d),
+        "case": d.case, "alpha": d.alpha, "verdict": verdict(d), "grade": GRADES[d.grade],
         "adequate_before": d.adequate_before, "adequate_after": d.adequate_after,
         "cause": cause_words(d),
         "instrument_error": [s.hypothesis.key for s in c["instrument"]],

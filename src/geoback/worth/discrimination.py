@@ -131,11 +131,15 @@ def discriminate(a, b, blocks, names: list[str], level: float = 0.05) -> Discrim
 
 def leading_pair(diagnosis, analysis):
     """The two hypotheses that explain the readings best in `diagnosis`'s first round, each as
-    (words, misfit, estimate): the two refitted hypotheses of lowest AIC, or the one refitted
+    (words, misfit, estimate): the accepted cause and its rival of another family when it was not
+    singled out, else the two refitted hypotheses of lowest AIC, or the one refitted
     and the case's model without it; None when no hypothesis was refitted."""
     first = diagnosis.rounds[0]
     fitted = sorted((s for s in first.ranking if s.refit is not None and s.misfit is not None
                      and np.isfinite(s.aic)), key=lambda s: s.aic)
+    acc = first.accepted
+    if acc is not None and getattr(acc, "rivals", None):  # not singled out: the cause and its rival of
+        fitted = [acc, acc.rivals[0]]  # another family (diagnosis/claims.py)
     pair = [(s.hypothesis.title, s.misfit, s.refit.p) for s in fitted[:2]]
     if not pair:
         return None

@@ -1,0 +1,214 @@
+"""A cause tested as a claim, not only as a better fit (issue 24): what a true cause must also do and a
+surrogate usually does not. Each check returns a ``Check`` (passed, words, numbers); ``grade`` turns
+them into the verdict's grade: *named* when every check passes, *explained but not singled out* when
+the hypothesis improves the fit but a check fails (results.GRADES).
+
+1. Cross-validation across instruments (``cross_validation``): the accepted model refitted with the
+   readings of instrument i left out predicts them; the prediction is scored against its band,
+
+       T_i = e_i^t (I + B_i F_-i^-1 B_i^t)^-1 e_i,     F_-i = B^t B - B_i^t B_i,
+
+   in the whitened problem of the seam (eqn 53: B = L^-1 A with the prior rows, r = L^-1 (x* - x)),
+   e_i the whitened residual of instrument i at the refit without it. The refit without i is one
+   Gauss-Newton step from the full optimum, delta = F_-i^+ (B^t r - B_i^t r_i) (exact for a model
+   linear in its parameters), and e_i is computed through the model at p + delta (one forward run,
+   the factorisations reused: with one modulus and fixed nu, K = E k, eqns 41-42). Directions of
+   the parameters that only instrument i informs are not moved and get an unbounded band (their
+   share of e_i is not counted). The same statistic for the model without the hypothesis gives
+   sum_i T_i(base); the hypothesis passes when it predicts the left-out readings better,
+   sum_i T_i(ext) < sum_i T_i(base). A cause that explains every instrument only when fitted to it
+   (a surrogate) does not.
+2. Residual structure (``residual_structure``): after the final joint fit, each instrument's whitened
+   residuals (for a linewise instrument: its intervals, eqns 11-20 via the Cholesky factor) are
+   tested for a mean (sum / sqrt(m)), a linear trend along the instrument (sum t_j w_j / ||t||,
+   t the centred station index) and runs of one sign (Wald-Wolfowitz, normal approximation), each
+   N(0, 1) under the model (conservative: fitted residuals have less variance), Bonferroni over the
+   tests and instruments at STRUCTURE_ALPHA (1 %).
+3. Rivals of other families (``rivals``): a refit of another family (results.FAMILIES) that improves
+   on the model it extends and whose quasi-AIC is within RIVAL_AIC of the accepted one's (the AIC
+   difference divided by the overdispersion chi^2/dof the accepted refit leaves, where its chi^2 test
+   fails)
+   explains the readings within the evidence: both are listed with the readings that separate them
+   (compare.separation).
+4. Determined: every extra parameter determined by the readings and off its search bounds.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import special
+
+from geoback.inference.misfit import Misfit
+
+STRUCTURE_ALPHA = 0.01  # family-wise level of the residual-structure tests: a check that downgrades a cause
+# the likelihood ratio accepted must be a strong finding itself (the baseline mesh's own error leaves mild
+# structure in precise readings: trends of 3 sigma in surface settlements of correctly named cases)
+RIVAL_AIC = 10.0  # a rival is dismissed only this far behind: 'essentially no support' (Burnham & Anderson
+# 2002, sec. 2.6: Delta_i > 10; within 4-7 a model has 'considerably less' support, not none)
+FLOOR = 1e-8  # relative eigenvalue of the scaled information below which a direction is not informed
+
+
+@dataclass
+class Check:
+    name: str  # 'cross-validation', 'residual-structure', 'rivals', 'determined'
+    passed: bool
+    text: str  # one sentence
+    detail: dict = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        return {"passed": self.passed, "text": self.text, **self.detail}
+
+
+def _instrument_rows(data) -> dict[str, np.ndarray]:
+    """Row indices of each instrument (its surveys at every stage together)."""
+    out: dict[str, list] = {}
+    for block, sl in data.block_rows():
+        out.setdefault(block.name, []).extend(range(sl.start, sl.stop))
+    return {k: np.asarray(v, int) for k, v in out.items()}
+
+
+def left_out_scores(misfit: Misfit, p: np.ndarray) -> dict[str, tuple[float, int]]:
+    """{instrument: (T_i, readings)}: each instrument's readings scored against the prediction of
+    the model refitted without them (module docstring, check 1)."""
+    p = np.asarray(p, float)
+    ev = misfit.evaluate(p, jacobian=True)
+    r, B = np.asarray(ev.r, float), np.asarray(ev.B, float)
+    F = B.T @ B
+    g = B.T @ r
+    d = np.sqrt(np.maximum(np.diag(F), 1e-300))
+    params = misfit.parameters
+    out = {}
+    for name, rows in _instrument_rows(misfit.data).items():
+        Bi, ri = B[rows], r[rows]
+        Fi = (F - Bi.T @ Bi) / np.outer(d, d)
+        w, V = np.linalg.eigh((Fi + Fi.T) / 2)
+        top = max(float(w.max()), 1e-300)
+        informed = w > FLOOR * top
+        inv_step = (V[:, informed] / w[informed]) @ V[:, informed].T  # pseudo-inverse: uninformed not moved
+        inv_band = (V / np.maximum(w, FLOOR * top)) @ V.T  # ... and given an unbounded band
+        delta = (inv_step @ ((g - Bi.T @ ri) / d)) / d
+        q = np.clip(p + delta, params.lower, params.upper)
+        try:
+            e = np.asarray(misfit.evaluate(q).r, float)[rows]
+        except Exception:  # noqa: BLE001 - the model not solvable there: the linear prediction
+            e = ri - Bi @ (q - p)
+        Bs = Bi / d
+        band = np.eye(len(rows)) + Bs @ inv_band @ Bs.T
+        out[name] = (float(e @ np.linalg.solve(band, e)), len(rows))
+    return out
+
+
+def cross_validation(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarray) -> Check:
+    """Check 1: does the extended model predict each instrument's readings, left out, better than
+    the model without the hypothesis?"""
+    try:
+        tb, te = left_out_scores(base, p_base), left_out_scores(ext, p_ext)
+    except Exception as exc:  # noqa: BLE001 - a check that cannot run does not pass
+        return Check("cross-validation", False, f"the cross-validation could not be computed ({exc})")
+    if len(te) < 2:
+        return Check("cross-validation", True, "one instrument only: nothing to cross-validate against",
+                     {"applicable": False})
+    Tb, Te = sum(v[0] for v in tb.values()), sum(v[0] for v in te.values())
+    per = {k: {"without": tb[k][0], "with": te[k][0], "readings": te[k][1]} for k in te}
+    worst = max(per, key=lambda k: per[k]["with"] - per[k]["without"])
+    passed = bool(Te < Tb)
+    if passed:
+        text = (f"each instrument left out in turn is predicted better with it (sum of scores {Te:.3g} against "
+                f"{Tb:.3g} without it)")
+    else:
+        text = (f"the instruments left out in turn are not predicted better with it (sum of scores {Te:.3g} against "
+                f"{Tb:.3g} without it; {worst}: {per[worst]['with']:.3g} against {per[worst]['without']:.3g}): it "
+                f"explains the readings only where it is fitted to them")
+    return Check("cross-validation", passed, text, {"with": Te, "without": Tb, "instruments": per})
+
+
+def _runs_z(w: np.ndarray) -> float:
+    """Wald-Wolfowitz runs test of the signs of w (normal approximation): z < 0 too few runs."""
+    s = w > 0
+    n1, n2 = int(s.sum()), int((~s).sum())
+    n = n1 + n2
+    if n1 == 0 or n2 == 0:
+        return -float(np.sqrt(n)) if n > 1 else 0.0  # one sign throughout: as few runs as can be
+    runs = 1 + int(np.sum(s[1:] != s[:-1]))
+    mu = 1 + 2 * n1 * n2 / n
+    var = 2 * n1 * n2 * (2 * n1 * n2 - n) / (n * n * (n - 1)) if n > 1 else 0.0
+    return float((runs - mu) / np.sqrt(var)) if var > 0 else 0.0
+
+
+MIN_READINGS = 5  # an instrument with fewer readings is not tested for structure
+
+
+def residual_structure(misfit: Misfit, p: np.ndarray, alpha: float = STRUCTURE_ALPHA) -> Check:
+    """Check 2: each instrument's whitened residuals after the fit tested for a mean, a trend and runs
+    (family-wise level `alpha`, Bonferroni over the tests)."""
+    ev = misfit.evaluate(np.asarray(p, float))
+    r = np.asarray(ev.r, float)
+    rows = {k: v for k, v in _instrument_rows(misfit.data).items() if len(v) >= MIN_READINGS}
+    tests = 3 * len(rows)
+    if not tests:
+        return Check("residual-structure", True, "no instrument has enough readings to test", {"applicable": False})
+    level = alpha / tests
+    zc = float(special.ndtri(1 - level / 2))
+    found, per = [], {}
+    for name, idx in rows.items():
+        w = r[idx]
+        m = len(w)
+        t = np.arange(m) - (m - 1) / 2
+        z = {"mean": float(w.sum() / np.sqrt(m)), "trend": float(t @ w / np.sqrt(t @ t)), "runs": _runs_z(w)}
+        per[name] = z
+        for k, v in z.items():
+            if abs(v) > zc and not (k == "runs" and v > 0):  # too many runs is not structure a cause leaves
+                found.append(f"{name}: {k} {abs(v):.1f} σ")
+    if found:
+        return Check("residual-structure", False,
+                     f"structure is left in the residuals ({'; '.join(found)}; level {level:.2g} per test): the model "
+                     f"still misses something there", {"instruments": per, "level": level})
+    return Check("residual-structure", True, f"no instrument's residuals keep a mean, trend or runs (level "
+                                             f"{level:.2g} per test)", {"instruments": per, "level": level})
+
+
+def overdispersion(acc, alpha: float = 0.05) -> float:
+    """c = chi^2 / dof of the accepted refit where its chi^2 test fails (the misfit it leaves beyond the
+    stated errors), else 1."""
+    rel = acc.reliability
+    c = float(getattr(rel, "reduced_chi2", float("nan")))
+    p = float(getattr(rel, "p_value", 1.0))
+    return c if np.isfinite(c) and c > 1.0 and p < alpha else 1.0
+
+
+def rivals(acc, refitted: list, threshold: float = float("nan")) -> list:
+    """Check 3's rivals: refits of another family that improve on the model they extend and come within
+    RIVAL_AIC of the accepted one in quasi-AIC (Burnham & Anderson 2002, sec. 2.5: the AIC difference
+    divided by the overdispersion c = chi^2/dof the accepted refit leaves, where its chi^2 test fails): two models that
+    both leave the readings unexplained beyond their errors are not told apart by a difference of that
+    misfit's own size. Whether the rival is significant on its own does not matter: an accepted cause
+    only just significant is not singled out from a rival nearly as good."""
+    c = overdispersion(acc)
+    return sorted((s for s in refitted if s is not acc and s.settled and s.family != acc.family and s.dJ > 0
+                   and np.isfinite(s.aic) and (s.aic - acc.aic) / c < RIVAL_AIC), key=lambda s: s.aic)
+
+
+def rival_check(acc, found: list) -> Check:
+    c = overdispersion(acc)
+    scaled = f" (differences divided by the χ²/dof {c:.3g} its refit leaves)" if c > 1 else ""
+    if not found:
+        return Check("rivals", True, f"no refit of another family comes within {RIVAL_AIC:.3g} AIC{scaled}",
+                     {"overdispersion": c})
+    names = "; ".join(f"{s.hypothesis.title} (ΔAIC {s.aic - acc.aic:+.2g})" for s in found) + scaled
+    return Check("rivals", False, f"another family explains the readings within the evidence: {names}",
+                 {"rivals": [s.hypothesis.key for s in found]})
+
+
+def determined_check(s) -> Check:
+    if s.at_bound:
+        which = ", ".join(f"{n} at its {b} search bound" for n, b in s.at_bound.items())
+        return Check("determined", False, f"{which}; not determined")
+    if not s.determined:
+        return Check("determined", False, "an extra parameter is not determined by the readings")
+    return Check("determined", True, "every extra parameter is determined by the readings")
+
+
+def grade(checks: dict) -> str:
+    """'named' when every check passed, else 'explained' (results.GRADES)."""
+    return "named" if all(c.passed for c in checks.values()) else "explained"

@@ -1,0 +1,187 @@
+"""Issue 24: a diagnosis that knows the edge of its library. Refits never worse than the model they
+extend, no interval at a search bound, a cause tested as a claim (cross-validation across instruments,
+residual structure, rivals of other families) and graded (named / explained but not singled out /
+no effect the library can detect), and the rival family a one-step model lacks (a support before the
+full release)."""
+from __future__ import annotations
+
+import copy
+import importlib.util
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from conftest import CASES
+from geoback.case.loading import LoadedCase, case_from_data, load_case
+from geoback.diagnosis import diagnose
+from geoback.diagnosis.claims import _runs_z, left_out_scores
+from geoback.errors import GeobackError
+
+CONCEALED = CASES / "concealed"
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "diagnosis_accuracy.py"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("diagnosis_accuracy", BENCH)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("diagnosis_accuracy", mod)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_runs_statistic_counts_runs_of_one_sign():
+    assert _runs_z(np.array([1.0, -1.0] * 10)) > 3  # alternating: many runs
+    assert _runs_z(np.ones(16)) == pytest.approx(-4.0)  # one sign throughout
+    assert _runs_z(np.array([1.0] * 8 + [-1.0] * 8)) < -3  # two runs only
+    rng = np.random.default_rng(3)
+    z = [_runs_z(rng.standard_normal(40)) for _ in range(400)]
+    assert abs(np.mean(z)) < 0.15 and 0.85 < np.std(z) < 1.15  # N(0, 1) under the null
+
+
+def _scored(J0, J_refit):
+    from geoback.diagnosis.hypotheses import Hypothesis
+    from geoback.diagnosis.results import Scored
+    from geoback.case.loading import Parameter
+
+    h = Hypothesis("k", "anisotropy", "t", "d", [Parameter(name="n[clay]", initial=1.0, bounds=(0.2, 5.0))])
+    s = Scored(h, 1.0, 1, 0.5)
+    s.misfit = SimpleNamespace(free=False)
+    s.refit = SimpleNamespace(J=J_refit, status="converged", history=())
+    s.reliability = SimpleNamespace(aic=J_refit + 2, bic=J_refit + 3, whitened_residual=np.zeros(10))
+    return s
+
+
+def test_a_refit_above_its_base_is_no_improvement():
+    from geoback.diagnosis.refit import compare
+
+    s = _scored(100.0, 119.2)  # the issue's round-2 refit: 'converged', 19.2 above the model it extends
+    compare(s, 100.0, 0)
+    assert s.worse and not s.settled and s.p_lr == 1.0
+    s = _scored(100.0, 90.0)
+    compare(s, 100.0, 0, J_null=95.0)  # another mesh's null lower than the base's: its own gain is not an effect
+    assert not s.worse and s.dJ == pytest.approx(5.0)
+
+
+def test_a_split_layer_with_a_gradient_starts_as_the_model_it_extends(tmp_path, monkeypatch):
+    """Round 2 after a gradient was accepted: the split's lower part inherits the gradient and starts at
+    the layer's modulus at the split depth, so the split at its null value is the current model (its
+    objective differs by the split mesh only); the refit ends no higher than that."""
+    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
+    from geoback.case.loading import Parameter
+    from geoback.diagnosis.boundary import _split_layer_misfit, null_modulus
+    from geoback.diagnosis.refit import fit_and_assess, null_start
+    from geoback.inference.estimate import fit
+    from geoback.inference.identification import prepare
+
+    a = prepare(load_case(CONCEALED / "stiffness-gradient.yaml"))
+    base = fit(a.misfit, a.settings)
+    cur = a.misfit.extended([Parameter(name="Egrad[clay]", initial=0.0, bounds=(-500.0, 5000.0))], start=base.p)
+    cf = fit(cur, a.settings)
+    assert cf.J < base.J - 50  # the gradient explains the readings
+    loaded, case = cur.simulation.loaded, cur.simulation.loaded.case
+    z = 14.0
+    E_null = null_modulus(cur, cf.p, "clay", z, 0.0)
+    split = _split_layer_misfit(cur, case, loaded, "clay", z, cf.p, E_null)
+    J_null = split.evaluate(null_start(split)).J
+    assert abs(J_null - cf.J) < 0.05 * cf.J + 2.0  # the split mesh alone
+    # as before the fix: the lower part without the gradient, from the modulus at the layer's top
+    E_top = cur.values(cf.p)["E[clay]"]
+    old = _split_layer_misfit(cur, case, loaded, "clay", z, cf.p, E_top)
+    old = old.extended([], values={"Egrad[clay_below]": 0.0})
+    assert old.evaluate(null_start(old)).J - cf.J > 10 * abs(J_null - cf.J)
+    res, _ = fit_and_assess(split, a.settings, "lm", 100, starts=[null_start(split), np.r_[cf.p, E_top]])
+    assert res.J <= J_null + 1e-9
+
+
+def test_left_out_scores_of_a_linear_model_are_the_deleted_residuals():
+    """Each instrument's score is its residual at the refit without it against its band; for the fitted
+    case model (nearly linear about its optimum) it follows chi^2 of its readings."""
+    from geoback.inference.estimate import fit
+    from geoback.inference.identification import prepare
+
+    a = prepare(load_case(CONCEALED / "null-1.yaml"))
+    f = fit(a.misfit, a.settings)
+    scores = left_out_scores(a.misfit, f.p)
+    names = {b.name for b in a.misfit.data.blocks}
+    assert set(scores) == names
+    total = sum(T for T, _ in scores.values())
+    m = sum(n for _, n in scores.values())
+    assert abs(total - m) < 4 * np.sqrt(2 * m)  # about chi^2(m): no mismatch left out of sample either
+    assert total >= f.J - 1e-6  # predicting what was not fitted is never better than fitting it
+
+
+def test_exclude_names_the_kinds_it_knows():
+    with pytest.raises(GeobackError, match="no-such-kind"):
+        diagnose(load_case(CONCEALED / "null-1.yaml"), exclude=["no-such-kind"])
+
+
+def test_a_concealed_effect_left_out_of_the_library_is_not_named():
+    """Leave one family out: the K0 gradient (5.3 sigma in the issue was called a depth offset with no
+    rival) diagnosed without K0-gradient in the library: whatever improves the fit is not named."""
+    d = diagnose(load_case(CONCEALED / "K0-gradient.yaml"), exclude=["K0-gradient"])
+    assert not d.adequate_before
+    assert d.grade != "named"
+    assert all(s.hypothesis.kind != "K0-gradient" for s in d.accepted)
+    for s in d.accepted:
+        assert s.grade == "explained" and any(not c.passed for c in s.checks.values())
+
+
+def test_a_supported_tunnel_modelled_in_one_step_is_not_named_a_stratum(bench, tmp_path, monkeypatch):
+    """The issue's independent-code case in small: a tunnel lined after a release of 0.5, modelled by
+    the engineer as a one-step excavation. A stratum improves the fit most, but the family the model
+    lacks (a support before the full release) explains the readings within the evidence: the stratum
+    is 'explained but not singled out', with no interval as if found, and the rival is listed."""
+    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
+    from geoback.inference.identification import prepare
+    from geoback.inference.synthetic import synthetic_readings
+    from geoback.reports.diagnosis_report import diagnosis_json, verdict
+
+    spec = bench.random_case(3, "null", 2024)
+    data = copy.deepcopy(spec["data"])
+    truth = copy.deepcopy(data)
+    R = data["geometry"]["radius"]
+    truth["construction"] = {"lining": {"name": "shotcrete", "thickness": round(0.1 * R, 3), "E": 8.0e6, "nu": 0.2},
+                             "stages": [{"name": "advance", "release": 0.5},
+                                        {"name": "excavation", "install": "shotcrete", "release": 1.0}]}
+    path = tmp_path / f"{data['name']}.yaml"
+    loaded = LoadedCase(case_from_data(data), path, {})
+    clean = synthetic_readings(LoadedCase(case_from_data(truth), path, {}), refine=2.0)
+    problem = prepare(loaded, with_readings=False)
+    problem = problem.with_readings(bench._stack(bench._with_noise(clean, loaded, spec["noise_seed"]), problem))
+    d = diagnose(problem)
+    support = [s for s in d.rounds[0].ranking if s.hypothesis.kind == "supported-release"]
+    assert support and support[0].settled and support[0].p_lr < d.rounds[0].threshold
+    assert d.accepted and d.grade == "explained"
+    acc = d.accepted[0]
+    if acc.family != "release":  # named otherwise: the release family is the truth's
+        assert any(r.hypothesis.kind == "supported-release" for r in acc.rivals)
+        words = verdict(d)
+        assert "EXPLAINED BUT NOT SINGLED OUT" in words and "supported before the full release" in words
+        js = diagnosis_json(d)
+        assert js["grade"] == "explained but not singled out"
+        assert all(e["ci95"] is None for e in js["missing"][0]["estimates"].values())
+        assert js["missing"][0]["rivals"][0]["kind"] == "supported-release"
+
+
+def test_a_score_test_alone_never_makes_a_model_inadequate(bench, tmp_path, monkeypatch):
+    """A null case of the accuracy benchmark (bench-063: noise only) whose chi^2 passes but whose K0-gradient
+    score test is below the level: with no round left to refit it (max_rounds=0) the model is adequate,
+    the score test a linear approximation no refit confirmed."""
+    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
+    from geoback.inference.identification import prepare
+    from geoback.inference.synthetic import synthetic_readings
+
+    spec = bench.random_case(63, "null", 2024)
+    loaded = LoadedCase(case_from_data(copy.deepcopy(spec["data"])), tmp_path / "null.yaml", {})
+    problem = prepare(loaded, with_readings=False)
+    clean = synthetic_readings(loaded, refine=2.0)
+    problem = problem.with_readings(bench._stack(bench._with_noise(clean, loaded, spec["noise_seed"]), problem))
+    d = diagnose(problem, max_rounds=0)
+    r = d.rounds[0]
+    assert r.p_value >= d.alpha
+    assert min(s.p_score for s in r.ranking if s.collinear_with is None) < r.threshold  # a score test fires
+    assert r.adequate and d.adequate_after and not d.accepted and d.grade == "none"
