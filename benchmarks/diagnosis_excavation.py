@@ -29,8 +29,11 @@ sys.path.insert(0, str(ROOT / "cases" / "concealed"))
 import generate_excavation as gen  # noqa: E402
 from table import print_table  # noqa: E402
 
-RIGHT = {"wall-stiffness": "wall-stiffness", "support-stiffness": "support-stiffness", "preload-lost": "preload-lost",
-         "soft-formation": "layer-boundary", "yielding": "yielding", "null": "nothing"}
+# the right names: a soft layer reaching below formation is the ground stiffer with depth (a stratum below or a
+# modulus gradient: one family of the library, told apart by AIC)
+RIGHT = {"wall-stiffness": {"wall-stiffness"}, "support-stiffness": {"support-stiffness"},
+         "preload-lost": {"preload-lost"}, "soft-formation": {"layer-boundary", "stiffness-gradient"},
+         "yielding": {"yielding"}, "null": {"nothing"}}
 TRUE = {"wall-stiffness": ("E[wall]", 1.0e7), "support-stiffness": ("k[P1]", 1.2e4), "preload-lost": ("preload[P2]", 0.0)}
 
 
@@ -65,12 +68,12 @@ def one(name: str, seed: int) -> dict:
     kinds = [s.hypothesis.kind for s in d.accepted]
     named = kinds[0] if kinds else "nothing"
     held = ""
-    if name in TRUE and named == RIGHT[name]:
+    if name in TRUE and named in RIGHT[name]:
         p, v = TRUE[name]
         for n, est, sd, lo, hi in d.estimates(d.accepted[0]):
             if n == p:
                 held = "yes" if lo <= v <= hi else f"NO ({lo:.4g}..{hi:.4g})"
-    verdict = "right" if named == RIGHT[name] else ("nothing" if named == "nothing" else "wrong")
+    verdict = "right" if named in RIGHT[name] else ("nothing" if named == "nothing" else "wrong")
     return dict(case=name, seed=seed, effect=effect, named=named, verdict=verdict, held=held, cpu=cpu)
 
 

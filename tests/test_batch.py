@@ -121,8 +121,11 @@ def test_batch_dask_gives_the_same_summary(local_batch, cases_dir, env, tmp_path
     assert (out / "paper-copy" / "summary.json").is_file()
 
 
+@pytest.mark.slow
 def test_batch_shipped_cases(env, tmp_path):
-    """Every case shipped in cases/ and its subfolders (whatever is there) identifies without failure."""
+    """Every case shipped in cases/ and its subfolders (whatever is there) identifies without failure (slow:
+    2.5 min for 24 cases on two cores; the top-level cases are each run in the default tier by
+    test_examples, test_openings_cli, test_staged_outputs and test_plastic_outputs)."""
     shipped = sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "cases").rglob("*")
                      if p.suffix in (".yaml", ".yml") and not any(part.startswith(".") for part in p.relative_to(ROOT).parts))
     assert shipped, "no shipped cases"
