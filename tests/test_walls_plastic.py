@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.test_walls import geoback_cache, pit, simulation  # noqa: F401 - the fixture is used by every test
+from test_walls import geoback_cache, pit, simulation  # noqa: F401 - the fixture is used by every test
 
 
 # ---------------------------------------------------------------------------- on mohr-coulomb ground
@@ -61,7 +61,7 @@ def test_the_walls_forces_on_yielding_ground_come_from_the_elastoplastic_solutio
 def test_mohr_coulomb_sensitivities_with_props_against_central_differences():
     """Soft clay yielding behind the wall: the new values' DDM columns against finite differences of the
     replayed schedule on the base run's branch (test_excavation_plastic's procedure)."""
-    from tests.test_excavation_plastic import _check_sensitivities
+    from test_excavation_plastic import _check_sensitivities
 
     data = _mc(preload=120.0)
     data["construction"]["props"][1]["preload"] = 40.0
