@@ -56,6 +56,15 @@ def test_concealed_effect_is_named_estimated_and_fixes_the_fit(name):
         fig.clear()
     cause = "instrument" if name in INSTRUMENT else "ground"
     assert [s.hypothesis.cause for s in d.accepted] == [cause]
+    # issue 24: the cause passes its claim checks (cross-validation, residual structure, no rival of another
+    # family within 10 AIC, determined): named, not only a better fit. The depth offset has a K0 gradient
+    # 9 AIC behind it (the confusion the issue reports): explained but not singled out, the rival listed.
+    failed = {c.name: c.text for c in d.accepted[0].checks.values() if not c.passed}
+    if name == "depth-offset":
+        assert d.grade == "explained" and set(failed) == {"rivals"}
+        assert [r.hypothesis.kind for r in d.accepted[0].rivals] == ["K0-gradient"]
+    else:
+        assert d.grade == "named", failed
     assert d.causes[cause] and not d.causes["ground" if cause == "instrument" else "instrument"]
 
 
@@ -209,6 +218,7 @@ def test_error_scales_example_names_the_instrument_and_refits_no_searched_bounda
     assert not any(k.startswith("layer-boundary") for k in refitted), refitted
     assert d.rounds[0].threshold is not None
     first = d.rounds[0]
-    scored = [s for s in first.ranking if s.collinear_with is None and not s.hypothesis.key.startswith("yielding")]
+    scored = [s for s in first.ranking if s.collinear_with is None  # (no score test: yielding, a support)
+              and not s.hypothesis.key.startswith(("yielding", "supported-release"))]
     assert scored and all(s.p_score >= first.threshold for s in scored)
     assert first.mismatches[0].instrument == "X1"

@@ -117,7 +117,7 @@ def _accepted_words(d, s) -> str:
     text = f"{title}: {est}"
     if s.grade == "explained":
         why = "; ".join(w for w in (_check_words(s), _rival_words(d, s)) if w)
-        return f"{title} - EXPLAINED BUT NOT SINGLED OUT ({why}): {est}"
+        text = f"{title} - EXPLAINED BUT NOT SINGLED OUT ({why}): {est}"
     if not s.determined:
         why = sorted({"it ended at a bound of its search" if c.code == "at-bound" else "its uncertainty is as large "
                       "as the value itself" for c in s.caveats})
@@ -213,6 +213,8 @@ def _explained_verdict(d) -> str:
     named = [s for s in d.accepted if s.grade == "named"]
     lead = ("The readings are explained but the cause is not singled out: the library's best explanation "
             "improves the fit but does not pass every check a true cause passes.")
+    if len(d.accepted) > 1:
+        lead += " Numbers from the final joint fit:"
     parts = [f"{_cap(CAUSES[s.hypothesis.cause])}: " + _accepted_words(d, s) + "." for s in d.accepted]
     tail = (" Named: " + ", ".join(s.hypothesis.title for s in named) + "." if named else
             " No cause is named; read the fit's improvement as where the model and the readings differ, not as "
