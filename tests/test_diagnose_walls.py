@@ -32,6 +32,7 @@ def test_a_slack_prop_level_is_named_and_its_stiffness_recovered():
     d = diagnose(load_case(CONCEALED / "excavation-support-stiffness.yaml"))
     assert not d.adequate_before
     assert [s.hypothesis.key for s in d.accepted] == ["support-stiffness[P1]"]
+    assert d.grade == "named"  # it passes the claim checks: no rival of another family explains the readings
     rel = d.final_reliability
     lo, hi = rel.interval95()
     i = rel.names.index("k[P1]")
