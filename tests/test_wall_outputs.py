@@ -22,8 +22,8 @@ import numpy as np
 import pytest
 
 from geoback.case.loading import LoadedCase, case_from_data
-from geoback.errors import CaseError
 from geoback.physics.factory import make_simulation
+from test_walls import _error  # the case's first refusal, in words
 
 from test_walls import pit
 
@@ -182,14 +182,6 @@ def test_a_load_cell_forecast_is_an_axial_force_in_kN(model):
     assert row[9] == "kN"
     fake = type("F", (), {"quantity": ["N"], "kind": ["instrument"]})()
     assert quantity_words(fake, 0) == "axial force"
-
-
-def _error(data):
-    try:
-        case_from_data(copy.deepcopy(data))
-    except CaseError as exc:
-        return str(exc)
-    return ""
 
 
 def test_bad_support_and_wall_forecasts_are_refused_located():

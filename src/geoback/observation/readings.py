@@ -356,8 +356,9 @@ def _unit_factor(unit: str, block: InstrumentBlock, fail, where: str) -> float:
     kind = {"m": "length", "mm": "length", "cm": "length", "rad": "angle", "mrad": "angle", "1/m": "curvature",
             "kN": "force", "MN": "force"}
     if kind[u] != kind[_default_unit(block)]:
+        what = "" if block.kind == "load_cell" else f" ({block.reading_type} readings)"
         raise fail(f"{where}: expected readings in a unit of {kind[_default_unit(block)]} for "
-                   f"{block.kind} '{block.name}' ({block.reading_type} readings), found '{unit}'")
+                   f"{block.kind} '{block.name}'{what}, found '{unit}'")
     return READING_UNITS[u]
 
 
