@@ -400,6 +400,9 @@ def _rest_problems(case: Case, construction: bool = True) -> list[tuple[tuple, s
             problems.append((("parameters", i, "name"),
                              f"expected each parameter once, found '{n}' again (as in parameters[{pnames.index(n)}])"))
     problems.extend(_error_scale_problems(case))
+    from geoback.case.timeline import timeline_problems
+
+    problems.extend(timeline_problems(case))
     problems.extend(forecast_problems(case))
     problems.extend(design_problems(case))
     return problems

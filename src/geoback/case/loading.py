@@ -63,13 +63,20 @@ def located_problems(problems: list[tuple[tuple, str]], marks: dict, file: str |
 class LoadedCase:
     """A validated case together with where it came from (for readings files and messages)."""
 
-    def __init__(self, case: Case, path: Path | None, marks: dict, allow_large: bool = False):
+    def __init__(self, case: Case, path: Path | None, marks: dict, allow_large: bool = False, until=None):
         self.case, self.path, self.marks = case, path, marks
         self.allow_large = allow_large  # meshes beyond the default size limit allowed (--allow-large)
+        # readings up to a stage (its name) or a date (a datetime) only: `geoback update`; None: all
+        self.until = until
 
     def with_case(self, case: Case) -> "LoadedCase":
-        """The same origin (file, marks, allow_large) for a changed case (a finer mesh, a split layer)."""
-        return LoadedCase(case, self.path, self.marks, allow_large=self.allow_large)
+        """The same origin (file, marks, allow_large, until) for a changed case (a finer mesh, a split layer)."""
+        return LoadedCase(case, self.path, self.marks, allow_large=self.allow_large, until=self.until)
+
+    def up_to(self, until) -> "LoadedCase":
+        """The same case reading only the surveys up to `until` (a stage name or a datetime; None: all);
+        instruments not read by then are left out of the fit (not yet installed or read)."""
+        return LoadedCase(self.case, self.path, self.marks, allow_large=self.allow_large, until=until)
 
     @property
     def folder(self) -> Path:

@@ -272,6 +272,47 @@ def _readings_shape(value: Any) -> str:
 
 
 StageName = Annotated[str, Field(pattern=NAME)]
+
+
+def _date(value: Any) -> Any:
+    """A date as YAML reads it (2026-03-05) or a text in one of ``case.dates.FORMS``, as a datetime."""
+    from geoback.case.dates import parse_date
+
+    return parse_date(value)
+
+
+Date = Annotated[Any, BeforeValidator(_date)]
+
+
+def _period(value: Any) -> Any:
+    """A stage's date: its start, or [start, end]."""
+    if isinstance(value, (list, tuple)):
+        if len(value) != 2:
+            raise ValueError(f"expected a date or [start, end], found a list of {len(value)}")
+        start, end = (_date(v) for v in value)
+        if end < start:
+            raise ValueError(f"expected an end on or after the start, found [{value[0]}, {value[1]}]")
+        return (start, end)
+    return _date(value)
+
+
+StagePeriod = Annotated[Any, BeforeValidator(_period)]
+
+
+def _baseline(value: Any) -> Any:
+    """A baseline survey: its date (as a datetime) when it reads as one, else its name in a survey column."""
+    from geoback.case.dates import parse_date
+
+    value = _header_text(value) if not hasattr(value, "year") else value
+    try:
+        return parse_date(value)
+    except ValueError:
+        if not value.strip():
+            raise ValueError("expected a survey date or name, found an empty text") from None
+        return value
+
+
+Baseline = Annotated[Any, BeforeValidator(_baseline)]
 # a list in station order, or a mapping stage -> list; the tags name the two shapes (dropped from
 # error locations, which then follow the file: instruments[0].readings[3])
 Readings = Annotated[Union[Annotated[list[Num], Tag("in-order")],
@@ -280,7 +321,7 @@ Readings = Annotated[Union[Annotated[list[Num], Tag("in-order")],
 
 # what a readings file's column can mean (`columns:` maps a role to a header the file uses)
 COLUMN_ROLES = ("instrument", "station", "point", "depth", "distance", "x", "y", "component", "reading",
-                "settlement", "stage")
+                "settlement", "stage", "date", "survey")
 
 
 def _header_text(value: Any) -> Any:
@@ -291,6 +332,27 @@ def _header_text(value: Any) -> Any:
 
 
 HeaderText = Annotated[str, BeforeValidator(_header_text), Field(min_length=1)]
+
+
+def _level(value: Any) -> Any:
+    """A trigger level: a number (SI: m, rad, kN) or a number with its unit ('15 mm', '250 kN')."""
+    if isinstance(value, str):
+        m = re.match(r"^\s*([-+0-9.eE]+)\s*([A-Za-z/]+)?\s*$", value)
+        if not m:
+            raise ValueError(f"expected a level: a number or a number with its unit ('15 mm'), found {shown(value)}")
+        unit = m.group(2)
+        return (_number(m.group(1)), unit) if unit else _number(m.group(1))
+    return _number(value)
+
+
+Level = Annotated[Any, BeforeValidator(_level)]
+
+
+class Triggers(Strict):
+    """Trigger levels of a TARP: amber (review) and red (act) on a quantity's magnitude."""
+
+    amber: Optional[Level] = Field(None, description="amber level (a number in SI units, or with its unit: '15 mm')")
+    red: Optional[Level] = Field(None, description="red level (above amber)")
 
 
 class _Instrument(Strict):
@@ -317,8 +379,21 @@ class _Instrument(Strict):
         None, description="the readings file's headers for what geoback reads, where the file names them otherwise: "
                           "{depth: 'Tiefe [m]', reading: 'Verschiebung [mm]'} (roles: " + ", ".join(COLUMN_ROLES) + ")")
     ignore_columns: Optional[list[HeaderText]] = Field(
-        None, description="headers of readings-file columns geoback is to leave unread (a date, a remark), by name "
+        None, description="headers of readings-file columns geoback is to leave unread (a remark), by name "
                           "with or without the unit")
+    baseline: Optional[Baseline] = Field(
+        None, description="the zero survey in the readings file (its date, or its name in a survey column): "
+                          "subtracted from every later survey; the stage in force on its date is the state the "
+                          "instrument reads increments from (before the first stage: the ground before construction)")
+    installed_after: Optional[StageName] = Field(
+        None, description="the stage after which the instrument was installed and zeroed: its readings are increments "
+                          "since then, x = P(u_k - u_installed) (implied by a dated baseline)")
+    surveys: Literal["separate", "average"] = Field(
+        "separate", description="several surveys within one stage: separate reading sets, each with its own C_x "
+                                "(default), or their average with C_x / n")
+    triggers: Optional[Triggers] = Field(
+        None, description="trigger levels (TARP) on the magnitude of every reading, in the readings' unit: "
+                          "{amber: 15 mm, red: 25 mm}")
 
 
 class PointsInstrument(_Instrument):
@@ -663,6 +738,9 @@ class Stage(Strict):
                                                             "elements removed) in this stage")
     remove: Optional[list[str]] = Field(None, description="with openings: linings removed in this stage (a "
                                                           "temporary invert)")
+    date: Optional[StagePeriod] = Field(
+        None, description="when the stage began (2026-03-05), or [start, end]: dated surveys are placed in the stage "
+                          "in force on their date (give every stage a date, or none)")
 
 
 class Construction(Strict):
@@ -683,6 +761,8 @@ class _Forecast(Strict):
     alert: Optional[Positive] = Field(
         None, description="alert level of the forecast quantity's magnitude, in its unit (m, kN/m, kNm/m; kN per prop or anchor): the "
                           "probability that it is exceeded is reported")
+    triggers: Optional[Triggers] = Field(
+        None, description="trigger levels (TARP) on the forecast quantity's magnitude: {amber: 20 mm, red: 30 mm}")
 
 
 class PointsForecast(_Forecast):

@@ -435,6 +435,71 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
         raise typer.Exit(3)
 
 
+UPDATE_EXIT = """Exit codes: 0 done; 1 a step's fit did not converge; 2 the input was refused (file, line, field);
+4 with --strict: a red trigger level is more likely than --red-probability at the next stage or the end (or a
+survey already reads above red); 130 interrupted."""
+
+
+@app.command(epilog=UPDATE_EXIT)
+@friendly
+def update(case: Path = typer.Argument(..., help="case file (YAML) with dated surveys or readings at several stages"),
+           until: Optional[str] = typer.Option(None, help="the surveys up to this stage (its name) or date "
+                                                          "(2026-03-20) only, as the engineer had them then "
+                                                          "(default: every survey)"),
+           out: Optional[str] = typer.Option(None, help="output folder (default results/<name>-update); this "
+                                                        "command's previous results there are replaced as a whole"),
+           plots: bool = typer.Option(False, "--plots", help="also write the figures (history, forecast checks)"),
+           strict: bool = typer.Option(False, "--strict", help="exit 4 when a red level is more likely than "
+                                                               "--red-probability"),
+           red_probability: float = typer.Option(0.05, "--red-probability", min=0.0, max=1.0,
+                                                 help="with --strict: the largest acceptable probability of red"),
+           quiet: bool = typer.Option(False, "--quiet", "-q", help="print only the final lines"),
+           allow_large: bool = _allow_large()):
+    """Fit the surveys stage by stage as construction proceeds: forecast the later stages, score each
+    stage's surveys against the previous forecast, and report the trigger levels (TARP)."""
+    out = _check_out(out)
+    loaded = _load(case, allow_large)
+    cut = _until(loaded, until)
+    folder = out if out is not None else _check_out(str(Path("results") / f"{loaded.case.name}-update"),
+                                                    "the results folder")
+    from geoback.commands.update import update_case
+
+    steps = update_case(loaded, folder, cut, say=None if quiet else _say, plots=plots)
+    last = steps[-1]
+    for t in last.triggers:
+        if not quiet:
+            typer.echo(f"trigger {t.quantity} ({t.when}, {t.stage}): {t.status}"
+                       + ("" if t.measured else f", P(> red) = {100 * t.p_red:.1f} %"))
+    estimates = ", ".join(f"{n} = {v:.6g}" for n, v in zip(last.result.parameters.names, last.result.fit.p))
+    typer.echo(f"{last.result.status} through stage '{last.stage}' ({len(steps)} step(s)): {estimates} -> {folder}")
+    if any(s.result.fit.status != "converged" for s in steps):
+        raise typer.Exit(1)
+    if strict:
+        over = [t for t in last.triggers if t.red is not None and
+                ((t.measured and abs(t.value) > t.red) or (not t.measured and t.p_red > red_probability))]
+        if over:
+            typer.echo(f"strict: red more likely than {100 * red_probability:g} % for "
+                       f"{', '.join(sorted({t.quantity for t in over}))}", err=True)
+            raise typer.Exit(4)
+
+
+def _until(loaded, until: Optional[str]):
+    """--until as a stage name or a date; refused (exit 2) when it is neither."""
+    if until is None:
+        return None
+    from geoback.case.dates import parse_date
+    from geoback.case.loading import stage_names
+    from geoback.errors import GeobackError
+
+    stages = stage_names(loaded.case)
+    if until in stages:
+        return until
+    try:
+        return parse_date(until)
+    except ValueError as exc:
+        raise GeobackError(f"--until: expected a construction stage ({', '.join(stages)}) or a date: {exc}") from None
+
+
 @app.command()
 @friendly
 def design(case: Path = typer.Argument(..., help="case file (YAML) with a design section"),

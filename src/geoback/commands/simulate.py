@@ -134,9 +134,9 @@ def without_readings(path: Path) -> LoadedCase:
     from geoback.case.yamlmarks import load_yaml_with_marks
 
     data, _ = load_yaml_with_marks(path)  # as case files are read (a lining's `on:` is a key, not true)
-    for ins in data.get("instruments", []):
-        ins.pop("readings_file", None)
-        ins.pop("readings", None)
+    for ins in data.get("instruments", []):  # what the readings say (dated surveys, a baseline) goes with them
+        for key in ("readings_file", "readings", "baseline", "installed_after", "columns", "ignore_columns"):
+            ins.pop(key, None)
     return LoadedCase(case_from_data(data), Path(path), {})
 
 

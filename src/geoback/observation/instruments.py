@@ -61,6 +61,7 @@ class Reading:
     x: float
     y: float
     stage: str | None = None  # construction stage the reading was taken at
+    survey: str | None = None  # the survey (its date or name) when the readings file tells surveys apart
 
 
 @dataclass
@@ -88,6 +89,13 @@ class InstrumentBlock:
     reference_end: str = ""  # linewise, in words: 'toe' or 'head' (inclinometer), 'reference end' (others)
     kept: tuple | None = None  # rows of the whole instrument this block reads (None: all; ``without``)
     support: str | None = None  # a load cell: the prop or anchor whose force it reads
+    survey: str | None = None  # the survey (date or name) of a dated readings file; None: one set a stage
+    since: str | None = None  # installed after this stage: reads P (u_stage - u_since) (None: since the start)
+
+    @property
+    def set_name(self) -> str:
+        """The key of this block's readings (``readings.CaseReadings``): the stage, or 'stage@survey'."""
+        return self.stage if self.survey is None else f"{self.stage}@{self.survey}"
 
     @property
     def m(self) -> int:
@@ -136,9 +144,17 @@ class InstrumentBlock:
         """Linewise: what each reading measures, in words ('horizontal displacement', ...)."""
         return LINEWISE_KINDS[self.kind].measures
 
-    def at(self, stage: str) -> "InstrumentBlock":
-        """The same instrument read at construction stage `stage`."""
-        return replace(self, stage=stage, labels=[replace(lab, stage=stage) for lab in self.labels])
+    def at(self, stage: str, survey: str | None = None, since: str | None = None, averaged: int = 1
+           ) -> "InstrumentBlock":
+        """The same instrument read at construction stage `stage` (in the survey `survey`), installed
+        after stage `since` (its readings increments since then), as the average of `averaged`
+        surveys (C_x / averaged: independent surveys)."""
+        out = replace(self, stage=stage, survey=survey, since=since if since is not None else self.since,
+                      labels=[replace(lab, stage=stage, survey=survey) for lab in self.labels])
+        if averaged > 1:
+            out = replace(out, covariance=self.covariance / averaged,
+                          constant_variances={k: v / averaged for k, v in self.constant_variances.items()})
+        return out
 
     def covariance_given(self, identified: set[str] | frozenset = frozenset()) -> np.ndarray:
         """C_x with the variance of every identified integration constant removed: once identified,
@@ -284,7 +300,8 @@ def case_blocks(loaded: LoadedCase) -> list[InstrumentBlock]:
     case = loaded.case
     if not case.instruments:
         raise loaded.error(("instruments",), "the case has no instruments: add at least one (see `geoback schema`)")
-    blocks = [build_block(ins, loaded, i) for i, ins in enumerate(case.instruments)]
+    blocks = [replace(build_block(ins, loaded, i), since=getattr(ins, "installed_after", None))
+              for i, ins in enumerate(case.instruments)]
     return check_inside(case, blocks, loaded) or blocks
 
 
@@ -407,7 +424,7 @@ def stage_constants(blocks: list[InstrumentBlock]) -> list[InstrumentBlock]:
     out = []
     for b in blocks:
         if any(count[n] > 1 for n in b.constant_names):
-            b = replace(b, constant_names=[f"{n[:-1]}.{b.stage}]" if count[n] > 1 else n for n in b.constant_names])
+            b = replace(b, constant_names=[f"{n[:-1]}.{b.set_name}]" if count[n] > 1 else n for n in b.constant_names])
         out.append(b)
     return out
 

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from geoback.case.dates import BEFORE, parse_date, shown_date, stage_on, stage_periods
 from geoback.case.loading import LoadedCase
 from geoback.case.messages import more_problems
 from geoback.case.schema import READING_UNITS
@@ -51,6 +52,8 @@ ROLE_WORDS = {  # what a column means -> its headers (lower case, unit removed, 
     "reading": ("reading", "value", "measured", "displacement", "force", "load"),
     "settlement": ("settlement", "setzung", "tassement"),  # positive down: u_y = -settlement
     "stage": ("stage", "construction stage", "phase"),
+    "date": ("date", "survey date", "reading date", "datum", "date time", "datetime", "timestamp"),
+    "survey": ("survey", "survey no", "survey number", "survey name", "set", "messung"),
 }
 COLUMNS = {word: role for role, words in ROLE_WORDS.items() for word in words}
 POSITIONS = ("depth", "distance", "x", "y")  # coordinates [m]; station and point are numbers or IDs
@@ -109,13 +112,15 @@ class Matching:
 
 @dataclass
 class CaseReadings:
-    """Readings of every instrument: values {instrument: {stage: values in station order}} in SI
+    """Readings of every instrument: values {instrument: {set: values in station order}} in SI
     units and displacement form, NaN where a reading is marked missing ({} for an instrument
-    without readings); how each was matched (``notes``); the instruments without readings."""
+    without readings), a set being a stage or, for dated surveys, 'stage@survey' (``sets`` says
+    which: {instrument: Sets}); how each was matched (``notes``); the instruments without readings."""
 
     values: dict
     notes: list
     unread: list
+    sets: dict = field(default_factory=dict)
 
     def lines(self) -> list[str]:
         """What `geoback validate` and `geoback run` print: how each instrument's readings were
@@ -524,8 +529,224 @@ def _sign(ins, settlement_column: bool, err) -> float:
     return -1.0 if settlement_column or sign == "settlement" else 1.0
 
 
-def file_readings(table: Table, block: InstrumentBlock, ins, stages: list[str], single: bool, err
-                  ) -> tuple[dict[str, np.ndarray], Matching]:
+BASELINE_WORDS = {"baseline", "base", "zero", "initial", "base reading", "nullmessung", "initial reading"}
+BEFORE_WORDS = {"", "-", "before", "initial", "baseline", "none", "pre-construction"}
+
+
+@dataclass(frozen=True)
+class SetInfo:
+    """One set of readings of an instrument: the stage it was read at, the survey (its date or name;
+    None: the file does not tell surveys apart), how many surveys it averages, and its key in
+    ``CaseReadings.values`` (the stage, or 'stage@survey')."""
+
+    name: str
+    stage: str
+    survey: str | None = None
+    when: object = None  # datetime of the survey (None: undated)
+    count: int = 1
+    key: tuple = ()  # its rows in _Surveys.rows
+
+    @property
+    def label(self) -> str:
+        return f"stage {self.stage}" + (f", survey {self.survey}" if self.survey else "")
+
+
+@dataclass(frozen=True)
+class Sets:
+    """An instrument's reading sets (name -> SetInfo) and the stage after which it reads increments
+    (None: since before construction)."""
+
+    sets: dict
+    since: str | None = None
+
+
+@dataclass
+class _Baseline:
+    key: tuple
+    survey: str
+    stage: str | None
+    when: object
+    lines: str
+
+    @property
+    def label(self) -> str:
+        return f"the baseline survey {self.survey}"
+
+
+class _Surveys:
+    """The rows of one instrument grouped in surveys and placed in stages (``case.dates`` rule), the
+    baseline survey found, and every date and stage checked against it."""
+
+    def __init__(self, table, block, ins, stages, periods, roles, fail, err):
+        self.table, self.block, self.ins, self.stages, self.periods = table, block, ins, stages, periods
+        self.roles, self.fail, self.err = roles, fail, err
+        self.dated = "date" in roles or "survey" in roles
+        self.rows: dict[tuple, list] = {}
+        self.info: dict[tuple, dict] = {}
+        if "stage" in roles:
+            if ins.stage is not None:
+                raise fail(f"expected either a stage column in {table.path.name} or stage: in the case, found both")
+            self.staged_by = "stage column"
+        elif ins.stage is not None:
+            self.staged_by = f"stage: {ins.stage} in the case"
+        elif "date" in roles and periods is not None:
+            self.staged_by = "placed by date: the stage in force on each"
+        elif len(stages) == 1:
+            self.staged_by = "the case's only stage"
+        elif "date" in roles:
+            raise fail(f"{table.path.name} has survey dates but the construction stages ({', '.join(stages)}) have "
+                       f"none: expected a date on every stage (date: 2026-03-05, or [start, end]) to place the "
+                       f"surveys, or a stage column")
+        else:
+            raise fail(f"{table.path.name} has no stage column and the case has construction stages "
+                       f"{', '.join(stages)}: expected a stage column, a date column with dated stages, or the stage "
+                       f"the readings of '{block.name}' were taken at (stage: {stages[-1]}, say)")
+
+    def _is_baseline(self, when, label) -> bool:
+        said = self.ins.baseline
+        if label is not None and label.strip().lower() in BASELINE_WORDS:
+            if said is not None and said != label and not (when is not None and not isinstance(said, str)
+                                                           and _same_day(said, when)):
+                raise self.fail(f"two baselines for '{self.block.name}': baseline: {_said(said)} in the case and the "
+                                f"survey '{label}' in {self.table.path.name}: expected one")
+            return True
+        if said is None:
+            return False
+        if isinstance(said, str):
+            return label == said
+        return when is not None and _same_day(said, when)
+
+    def add(self, line: int, fields: list[str]) -> None:
+        roles, fail, where = self.roles, self.fail, self.table.where(line)
+        when = label = None
+        if "date" in roles:
+            try:
+                when = parse_date(fields[roles["date"]])
+            except ValueError as exc:
+                raise fail(f"{where}: {exc}") from None
+        if "survey" in roles:
+            label = fields[roles["survey"]].strip()
+            if not label:
+                raise fail(f"{where}: expected the survey's name or number in the survey column, found an empty cell")
+        base = self._is_baseline(when, label)
+        survey = label if label is not None else (shown_date(when) if when is not None else None)
+        if "stage" in roles:
+            text = fields[roles["stage"]].strip()
+            if base and text.lower() in BEFORE_WORDS:
+                stage = BEFORE
+            elif text not in self.stages:
+                raise fail(f"{where}: stage '{text}' is not a construction stage of the case "
+                           f"(stages: {', '.join(self.stages)})")
+            else:
+                stage = text
+            if self.periods is not None and when is not None:
+                try:
+                    on = stage_on(self.periods, when)
+                except ValueError as exc:
+                    raise fail(f"{where}: the survey of '{self.block.name}' dated {exc}") from None
+                if on != stage and not (base and stage is BEFORE):
+                    raise fail(f"{where}: expected stage '{on or 'before construction'}' for a survey dated "
+                               f"{shown_date(when)} (the stage in force then), found stage '{text}'")
+        elif self.ins.stage is not None:
+            stage = self.ins.stage
+        elif "date" in roles and self.periods is not None:
+            try:
+                stage = stage_on(self.periods, when)
+            except ValueError as exc:
+                raise fail(f"{where}: the survey of '{self.block.name}' dated {exc}") from None
+            if stage is BEFORE and not base:
+                first = self.periods[0]
+                raise fail(f"{where}: a survey of '{self.block.name}' dated {shown_date(when)}, before construction "
+                           f"began (stage '{first[0]}' on {shown_date(first[1])}): expected it on or after that date; "
+                           f"only the baseline survey may come before (baseline: {shown_date(when)} in the case, if "
+                           f"it is the zero reading)")
+        else:
+            stage = self.stages[0]
+        key = (base, survey, stage)
+        if key not in self.rows:
+            same = [k for k in self.rows if k[1] == survey and survey is not None and k[0] == base]
+            if same:
+                raise fail(f"{where}: survey {survey} of '{self.block.name}' is placed in stage '{stage}' here and in "
+                           f"stage '{same[0][2]}' on line {self.info[same[0]]['lines'][0]}: expected one stage a survey")
+            self.rows[key], self.info[key] = [], {"when": when, "lines": []}
+        self.rows[key].append((line, fields))
+        self.info[key]["lines"].append(line)
+
+    def finish(self) -> list[SetInfo]:
+        """The reading sets in construction order (then by date), the baseline kept apart; every
+        survey checked to come after the baseline and at or after the installation."""
+        fail, name, stages = self.fail, self.block.name, self.stages
+        bases = [k for k in self.rows if k[0]]
+        if len(bases) > 1:
+            a, b = bases[:2]
+            raise fail(f"{self.table.where(self.info[b]['lines'][0])}: two baselines for '{name}': surveys {a[1]} "
+                       f"and {b[1]}: expected one")
+        said = self.ins.baseline
+        if said is not None and not bases:
+            found = sorted({k[1] for k in self.rows if k[1] is not None})
+            raise fail(f"{self.table.where()}: expected the baseline survey {_said(said)} of '{name}', found "
+                       f"{'surveys ' + ', '.join(found[:8]) if found else 'no date or survey column'}")
+        self.baseline = None
+        self.since = self.ins.installed_after
+        if bases:
+            k = bases[0]
+            lines = self.info[k]["lines"]
+            self.baseline = _Baseline(k, k[1] or "(baseline)", k[2], self.info[k]["when"], f"{min(lines)}-{max(lines)}")
+            if self.since is not None and self.since != k[2]:
+                raise self.err(("installed_after",), f"expected installed_after to agree with the baseline "
+                                                          f"survey's stage ('{k[2] or 'before construction'}'), found "
+                                                          f"'{self.since}'")
+            self.since = k[2]
+        sets = []
+        order = {s: j for j, s in enumerate(stages)}
+        for key in sorted((k for k in self.rows if not k[0]),
+                          key=lambda k: (order[k[2]], self.info[k]["when"] or 0, self.info[k]["lines"][0])):
+            _, survey, stage = key
+            when = self.info[key]["when"]
+            line = self.info[key]["lines"][0]
+            if self.baseline is not None and self.baseline.when is not None and when is not None \
+                    and when < self.baseline.when:
+                raise fail(f"{self.table.where(line)}: survey {survey} of '{name}' is dated before its baseline survey "
+                           f"({shown_date(self.baseline.when)}): expected every survey on or after the baseline")
+            if self.since is not None and order[stage] < order[self.since]:
+                raise fail(f"{self.table.where(line)}: '{name}' was read at stage '{stage}', before it was installed "
+                           f"(after stage '{self.since}'): expected readings at stage '{self.since}' or later")
+            set_name = stage if survey is None else f"{stage}@{survey}"
+            sets.append(SetInfo(set_name, stage, survey, when, 1, key))
+        return sets
+
+def _same_day(said, when) -> bool:
+    """A baseline given as a day matches any time on it; a date-time matches exactly."""
+    if said.hour == said.minute == said.second == 0:
+        return said.date() == when.date()
+    return said == when
+
+
+def _said(said) -> str:
+    return said if isinstance(said, str) else shown_date(said)
+
+
+def _averaged(out: dict, meta: dict, block, fail, table) -> tuple[dict, dict]:
+    """`surveys: average`: the sets of each stage replaced by their mean (C_x / n where n surveys)."""
+    by_stage: dict[str, list[str]] = {}
+    for name, m in meta.items():
+        by_stage.setdefault(m.stage, []).append(name)
+    new, info = {}, {}
+    for stage, names in by_stage.items():
+        stack = np.array([out[n] for n in names])
+        gone = np.isnan(stack)
+        if gone.any() and not gone.all(axis=0)[gone.any(axis=0)].all():
+            raise fail(f"{table.where()}: '{block.name}' at stage {stage}: a reading missing in some surveys only "
+                       f"cannot be averaged with one C_x / n: expected the same readings in every survey of a stage "
+                       f"(or surveys: separate)")
+        new[stage] = stack.mean(axis=0)
+        info[stage] = SetInfo(stage, stage, " + ".join(str(meta[n].survey) for n in names), meta[names[-1]].when,
+                              len(names))
+    return new, info
+
+
+def file_readings(table: Table, block: InstrumentBlock, ins, stages: list[str], single: bool, err,
+                  periods=None) -> tuple[dict[str, np.ndarray], Matching, "Sets"]:
     """The block's readings per stage from a parsed file (NaN where marked missing) and how they
     were matched. single: the file serves this instrument only (then the instrument column is
     optional). err(path, message): the error located at the instrument's field `path`."""
@@ -553,32 +774,14 @@ def file_readings(table: Table, block: InstrumentBlock, ins, stages: list[str], 
     sign = _sign(ins, value_role == "settlement", err)
     matcher = _Matcher(table, cols, block, ins, fail)
     matcher.point_ids(mine)
-    # every row in a construction stage: the stage column, the case's stage:, or the only stage
-    if "stage" in roles:
-        if ins.stage is not None:
-            raise err(("stage",), f"expected either a stage column in {table.path.name} or stage: in the case, "
-                                  f"found both")
-        staged_by = "stage column"
-    elif ins.stage is not None:
-        staged_by = f"stage: {ins.stage} in the case"
-    elif len(stages) == 1:
-        staged_by = "the case's only stage"
-    else:
-        raise fail(f"{table.path.name} has no stage column and the case has construction stages "
-                   f"{', '.join(stages)}: expected a stage column, or the stage the readings of '{block.name}' were "
-                   f"taken at (stage: {stages[-1]}, say)")
-    by_stage: dict[str, list] = {}
-    for line, fields in mine:
-        stage = fields[roles["stage"]] if "stage" in roles else (ins.stage or stages[0])
-        if stage not in stages:
-            raise fail(f"{table.where(line)}: stage '{stage}' is not a construction stage of the case "
-                       f"(stages: {', '.join(stages)})")
-        by_stage.setdefault(stage, []).append((line, fields))
+    surveys = _Surveys(table, block, ins, stages, periods, roles, fail, err)
+    staged_by = surveys.staged_by
     comps = matcher.places.comps
     out, missing, details, ref_rows = {}, [], [], []
-    where_stage = (lambda s: "" if len(stages) == 1 else f" at stage {s}")
-    for stage in [s for s in stages if s in by_stage]:
-        rows = by_stage[stage]
+    where_stage = (lambda s: "" if len(stages) == 1 and s == stages[0] else f" at {s}")
+
+    def collect(stage: str, rows: list) -> np.ndarray:
+        """One survey's values in station order (NaN where marked missing) from its rows."""
         values = np.full(block.m, np.nan)
         marked = np.zeros(block.m, bool)
         first_line: dict[int, int] = {}
@@ -605,8 +808,9 @@ def file_readings(table: Table, block: InstrumentBlock, ins, stages: list[str], 
                 continue
             i = k * len(comps) + comps.index(c)
             if i in first_line:
+                again = " (a date or survey column tells repeated surveys apart)" if not surveys.dated else ""
                 raise fail(f"{table.where(line)}: {_label(block, i)} of '{block.name}'{where_stage(stage)} is given "
-                           f"twice (also on line {first_line[i]})")
+                           f"twice (also on line {first_line[i]}){again}")
             first_line[i] = line
             if gone:
                 marked[i] = True
@@ -623,7 +827,31 @@ def file_readings(table: Table, block: InstrumentBlock, ins, stages: list[str], 
             raise fail(f"{table.where()}: '{block.name}'{where_stage(stage)} has no reading for "
                        f"{', '.join(absent[:8])}{', ...' if len(absent) > 8 else ''} (a reading not taken is written "
                        f"as an empty cell, -, n/a or NaN)")
-        out[stage] = values
+        return values
+
+    for line, fields in mine:
+        surveys.add(line, fields)
+    sets = surveys.finish()
+    base = None
+    if surveys.baseline is not None:
+        b = surveys.baseline
+        base = collect(b.label, surveys.rows[b.key])
+        details.append(f"baseline survey {b.survey} (lines {b.lines}) subtracted from every later survey; the "
+                       f"readings are increments since {'before construction' if b.stage is None else 'stage ' + repr(b.stage)}")
+    meta = {}
+    for info in sets:
+        values = collect(info.label, surveys.rows[info.key])
+        if base is not None:
+            values = values - base
+        meta[info.name] = info
+        out[info.name] = values
+    if ins.surveys == "average":
+        out, meta = _averaged(out, meta, block, fail, table)
+        details.extend(f"{s}: the average of {m.count} surveys ({', '.join(m.survey.split(' + '))}), C_x / {m.count}"
+                       for s, m in meta.items() if m.count > 1)
+    if surveys.dated:
+        details.append(f"{len(sets)} survey{'s' if len(sets) != 1 else ''} besides the baseline"
+                       if base is not None else f"{len(sets)} survey{'s' if len(sets) != 1 else ''}")
     if ref_rows:
         end = block.reference_end or "reference end"
         details.append(f"the {end} row{'s' if len(ref_rows) > 1 else ''} (line{'s' if len(ref_rows) > 1 else ''} "
@@ -643,7 +871,7 @@ def file_readings(table: Table, block: InstrumentBlock, ins, stages: list[str], 
     note = Matching(block.name, table.path.name, how, count,
                     tuple((s, int(np.count_nonzero(~np.isnan(v)))) for s, v in out.items()), staged_by,
                     tuple(missing), tuple(details))
-    return out, note
+    return out, note, Sets(meta, surveys.since)
 
 
 def _check_reference(table, line, block, matcher, fields, value, previous, stage, fail) -> None:
@@ -665,7 +893,8 @@ def _check_reference(table, line, block, matcher, fields, value, previous, stage
                    f"{fields[matcher.cols.roles['settlement' if 'settlement' in matcher.cols.roles else 'reading']]}")
 
 
-def inline_readings(ins, block: InstrumentBlock, stages: list[str], err) -> tuple[dict[str, np.ndarray], Matching]:
+def inline_readings(ins, block: InstrumentBlock, stages: list[str], err
+                    ) -> tuple[dict[str, np.ndarray], Matching, Sets]:
     """An instrument's inline readings per stage, and how they were placed."""
     at = ("readings",)
     if isinstance(ins.readings, dict):
@@ -698,9 +927,16 @@ def inline_readings(ins, block: InstrumentBlock, stages: list[str], err) -> tupl
         sets = {s: np.where(uy, -v, v) for s, v in sets.items()}
         details.append("sign: settlement: u_y = -reading (positive down)")
     ordered = [s for s in stages if s in sets]
+    since = ins.installed_after
+    if since is not None:
+        early = [s for s in ordered if stages.index(s) < stages.index(since)]
+        if early:
+            raise err(at, f"'{block.name}' was read at stage '{early[0]}', before it was installed (after stage "
+                          f"'{since}'): expected readings at stage '{since}' or later")
+        details.append(f"increments since it was installed after stage '{since}'")
     note = Matching(block.name, "inline", "in station order from the reference end" if block.m > 1 else "(one reading)",
                     sum(block.m for _ in ordered), tuple((s, block.m) for s in ordered), staged_by, (), tuple(details))
-    return {s: sets[s] for s in ordered}, note
+    return {s: sets[s] for s in ordered}, note, Sets({s: SetInfo(s, s) for s in ordered}, since)
 
 
 # ---------------------------------------------------------------------------------------- the case
@@ -726,6 +962,8 @@ def read_readings(loaded: LoadedCase, blocks: list[InstrumentBlock], stages: lis
         if ins.readings_file is not None:
             users.setdefault((loaded.folder / ins.readings_file).resolve(), []).append(b.index)
     values: dict[str, dict[str, np.ndarray]] = {}
+    meta: dict[str, Sets] = {}
+    periods = stage_periods(case)
     notes, unread, errors, broken = [], [], [], set()
     for b in blocks:
         ins = case.instruments[b.index]
@@ -741,14 +979,16 @@ def read_readings(loaded: LoadedCase, blocks: list[InstrumentBlock], stages: lis
             if ins.readings is not None and ins.readings_file is not None:
                 raise err(("readings_file",), "give either 'readings' or 'readings_file', not both")
             sets: dict[str, np.ndarray] = {}
+            info = Sets({}, ins.installed_after)
             if ins.readings is not None:
-                sets, note = inline_readings(ins, b, stages, err)
+                sets, note, info = inline_readings(ins, b, stages, err)
             elif ins.readings_file is not None:
                 path = (loaded.folder / ins.readings_file).resolve()
                 if path not in tables:
                     tables[path] = read_table(loaded.folder / ins.readings_file,
                                               lambda m: err(("readings_file",), m))
-                sets, note = file_readings(tables[path], b, ins, stages, len(users[path]) == 1, err)
+                sets, note, info = file_readings(tables[path], b, ins, stages, len(users[path]) == 1, err, periods)
+            sets, info = _until(loaded, sets, info, stages)
             for stage, v in sets.items():
                 if b.reading_type == "primary":
                     sets[stage] = b.integration @ v  # eqns 11, 15, 18 with the constants taken as zero
@@ -761,6 +1001,7 @@ def read_readings(loaded: LoadedCase, blocks: list[InstrumentBlock], stages: lis
             values[b.name] = {}
             continue
         values[b.name] = sets
+        meta[b.name] = info
         if any(np.any(~np.isnan(v)) for v in sets.values()):
             notes.append(note)
         else:
@@ -787,7 +1028,24 @@ def read_readings(loaded: LoadedCase, blocks: list[InstrumentBlock], stages: lis
                                        f"{'s' if len(unused) > 1 else ''})"))
     if errors:
         raise _combined(errors)
-    return CaseReadings(values, notes, unread)
+    return CaseReadings(values, notes, unread, meta)
+
+
+def _until(loaded: LoadedCase, sets: dict, info: Sets, stages: list[str]) -> tuple[dict, Sets]:
+    """Only the sets read up to the case's cut-off (``LoadedCase.until``: a stage, or a date for
+    dated surveys), for `geoback update`."""
+    until = getattr(loaded, "until", None)
+    if until is None:
+        return sets, info
+    keep = [n for n, m in info.sets.items() if _before(m, until, stages)] if info.sets else \
+        [n for n in sets if stages.index(n) <= stages.index(until) if isinstance(until, str)]
+    return {n: sets[n] for n in keep}, Sets({n: info.sets[n] for n in keep if n in info.sets}, info.since)
+
+
+def _before(m: SetInfo, until, stages: list[str]) -> bool:
+    if isinstance(until, str):
+        return stages.index(m.stage) <= stages.index(until)
+    return m.when is not None and m.when <= until
 
 
 def case_readings(loaded: LoadedCase, blocks: list[InstrumentBlock], stages: list[str]) -> dict:
@@ -806,9 +1064,10 @@ def readings_report(loaded: LoadedCase) -> CaseReadings:
 
 
 def require_readings(loaded: LoadedCase, report: CaseReadings | None = None) -> None:
-    """Refuse, naming them, instruments without readings (identification needs every one's)."""
+    """Refuse, naming them, instruments without readings (identification needs every one's; up to
+    a cut-off, ``LoadedCase.until``, those not read yet are left out instead)."""
     report = report if report is not None else readings_report(loaded)
-    if not report.unread:
+    if not report.unread or getattr(loaded, "until", None) is not None:
         return
     names = [ins.name for ins in loaded.case.instruments]
     i = names.index(report.unread[0])
@@ -819,31 +1078,35 @@ def require_readings(loaded: LoadedCase, report: CaseReadings | None = None) -> 
 
 def survey_blocks(loaded: LoadedCase, stages: list[str], read: bool = True
                   ) -> tuple[list[InstrumentBlock], np.ndarray | None]:
-    """One block per instrument and construction stage it was read at (stages in construction
-    order), without the readings marked missing (``InstrumentBlock.without``), and their readings
-    stacked in that order; an instrument without readings is predicted at the last stage, and then
-    there is no measured vector (None). read=False: every instrument at every stage, no readings
-    (forward runs, study data)."""
+    """One block per instrument and set of readings (a stage, or each dated survey: in construction
+    order, then by date), without the readings marked missing (``InstrumentBlock.without``), reading
+    increments since its installation when it was installed after a stage (``since``), and their
+    readings stacked in that order; an instrument without readings is predicted at the last stage,
+    and then there is no measured vector (None). read=False: every instrument at every stage, no
+    readings (forward runs, study data)."""
     from geoback.observation.instruments import case_blocks
 
     geometry = case_blocks(loaded)
     if not read:
         return [g.at(stage) for g in geometry for stage in stages], None
-    readings = case_readings(loaded, geometry, stages)
+    report = read_readings(loaded, geometry, stages)
     blocks, values, complete = [], [], True
     for g in geometry:
-        sets = {s: v for s, v in readings[g.name].items() if np.any(~np.isnan(v))}
+        sets = {s: v for s, v in report.values[g.name].items() if np.any(~np.isnan(v))}
+        info = report.sets.get(g.name, Sets({}))
         if not sets:
-            blocks.append(g.at(stages[-1]))
+            if getattr(loaded, "until", None) is not None:
+                continue  # `geoback update`: not read by the cut-off (installed or read later)
+            blocks.append(g.at(stages[-1], since=info.since))
             complete = False
             continue
-        for stage in stages:
-            if stage in sets:
-                v = sets[stage]
-                gone = np.flatnonzero(np.isnan(v))
-                blocks.append(g.at(stage).without(gone) if len(gone) else g.at(stage))
-                values.append(v[~np.isnan(v)])
-    return blocks, (np.concatenate(values) if complete else None)
+        for name, v in sets.items():
+            m = info.sets.get(name, SetInfo(name, name))
+            block = g.at(m.stage, survey=m.survey, since=info.since, averaged=m.count)
+            gone = np.flatnonzero(np.isnan(v))
+            blocks.append(block.without(gone) if len(gone) else block)
+            values.append(v[~np.isnan(v)])
+    return blocks, ((np.concatenate(values) if values else np.zeros(0)) if complete else None)
 
 
 def measured_values(loaded: LoadedCase, blocks: list[InstrumentBlock]) -> np.ndarray | None:
@@ -854,7 +1117,7 @@ def measured_values(loaded: LoadedCase, blocks: list[InstrumentBlock]) -> np.nda
     readings = case_readings(loaded, blocks, stage_names(loaded.case))  # the case's stages, not only those read
     values = []
     for b in blocks:
-        v = readings.get(b.name, {}).get(b.stage)
+        v = readings.get(b.name, {}).get(b.set_name)
         if v is None:
             return None
         v = v[list(b.kept)] if b.kept is not None else v

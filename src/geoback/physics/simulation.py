@@ -21,7 +21,7 @@ from __future__ import annotations
 import copy
 import time
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import replace, dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -221,7 +221,7 @@ class Simulation(ABC):
         if not self.reads_depth_offsets and (survey.offsets(values) or any(n in survey.depth_rows for n in wrt)):
             raise NotImplementedError(f"{type(self).__name__} does not read the survey at depth offsets: "
                                       f"inclinometer depth offsets (zoff) are not available with it")
-        pred = self._readings(values, physical)
+        pred = self._increments(values, physical, self._readings(values, physical))
         m = survey.m
         x = pred.x[:m]
         A_phys = pred.A[:m] if sensitivities and pred.A is not None else None
@@ -249,6 +249,37 @@ class Simulation(ABC):
             else:
                 A[:, j] = A_phys[:, k]
                 k += 1
+        return Prediction(x, A)
+
+    def _increments(self, values: Mapping, physical: Sequence[str], pred: Prediction) -> Prediction:
+        """Instruments installed after a stage read increments since then: x = P (u_k - u_since)
+        (their rows of ``operator``, depth-derivative rows included), from a view reading the same
+        instruments at their installation stage (the same factorisations and runs)."""
+        survey = self.survey
+        if not any(b.since is not None for b in survey.blocks):
+            return pred
+        cached = self.__dict__.get("_installation")
+        if cached is None or cached[0] is not survey:
+            blocks = [replace(b.at(b.since), since=None) if b.since is not None else b for b in survey.blocks]
+            view = self._sharing()
+            view.domain = self.domain.reading(blocks)
+            view._survey_changed()
+            view.__dict__.pop("_installation", None)
+            mask = np.zeros(len(pred.x), bool)
+            r0 = 0
+            for b in survey.blocks:
+                if b.since is not None:
+                    mask[r0:r0 + b.m] = True
+                    rows = survey.depth_rows.get(f"zoff[{b.name}]")
+                    if rows is not None:
+                        mask[rows[1]] = True
+                r0 += b.m
+            cached = (survey, view, mask)
+            self.__dict__["_installation"] = cached
+        _, view, mask = cached
+        base = view._readings(values, physical)
+        x = pred.x - np.where(mask, base.x, 0.0)
+        A = None if pred.A is None else pred.A - np.where(mask[:, None], base.A, 0.0)
         return Prediction(x, A)
 
     def release(self) -> None:

@@ -18,7 +18,9 @@ from geoback.units import number, rounded, shown
 
 def reading_label(lab, staged: bool = False) -> str:
     """instrument:station:component, and @stage when readings come from several construction stages."""
-    return f"{lab.instrument}:{lab.station}:{lab.component}" + (f"@{lab.stage}" if staged else "")
+    survey = getattr(lab, "survey", None)
+    return (f"{lab.instrument}:{lab.station}:{lab.component}" + (f"@{lab.stage}" if staged or survey else "")
+            + (f"/{survey}" if survey else ""))
 
 
 def several_stages(labels) -> bool:
@@ -303,10 +305,13 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
     write_matrix_csv(out / "information_density.csv", labels, rel.information_density)
     measured = res.data.measured
     residual = measured - f.x
-    write_csv(out / "readings.csv", READINGS_HEADER,
-              [[lab.instrument, lab.kind, lab.station, lab.stage or "", lab.component, rounded(lab.x), rounded(lab.y),
-                rounded(1e3 * measured[i]), rounded(1e3 * f.x[i]), rounded(1e3 * residual[i]),
-                rounded(rel.whitened_residual[i]), rounded(rel.leverage[i])] for i, lab in enumerate(res.data.labels)])
+    dated = any(getattr(lab, "survey", None) for lab in res.data.labels)  # a survey column after the stage
+    header = READINGS_HEADER[:4] + ["survey"] + READINGS_HEADER[4:] if dated else READINGS_HEADER
+    write_csv(out / "readings.csv", header,
+              [[lab.instrument, lab.kind, lab.station, lab.stage or ""] + ([lab.survey or ""] if dated else [])
+               + [lab.component, rounded(lab.x), rounded(lab.y),
+                  rounded(1e3 * measured[i]), rounded(1e3 * f.x[i]), rounded(1e3 * residual[i]),
+                  rounded(rel.whitened_residual[i]), rounded(rel.leverage[i])] for i, lab in enumerate(res.data.labels)])
     write_csv(out / "error_scales.csv", ERROR_SCALE_HEADER, error_scale_rows(rel))
     write_csv(out / "iterations.csv", ["iteration", "mu", "J"] + names + ["accepted"],
               [[h.k, h.mu, h.J] + list(h.p) + [h.accepted] for h in f.history])

@@ -195,7 +195,9 @@ class _Spec:
     unit: str | None = None  # the rows' unit where the quantity alone does not say it (a load cell's force)
 
 
-def _specs(loaded, stages: list[str]) -> list[_Spec]:
+def _specs(loaded, stages: list[str], read_blocks=()) -> list[_Spec]:
+    """What each forecast of the case reads; `read_blocks`: the blocks the fit read (an instrument's
+    installation stage, from its baseline survey, is theirs)."""
     case = loaded.case
     by_name = None
     out = []
@@ -228,6 +230,9 @@ def _specs(loaded, stages: list[str]) -> list[_Spec]:
         elif f.kind == "instrument":
             by_name = by_name or {b.name: b for b in case_blocks(loaded)}
             b = by_name[f.instrument]
+            read = [x for x in read_blocks if x.name == f.instrument]
+            if read:  # installed after a stage (by a dated baseline): the forecast reads increments too
+                b = replace(b, since=read[0].since)
             m = b.m
             s.block = replace(b, name=f.name, constants=np.zeros((m, 0)), constant_names=[], constant_variances={})
             pts = b.stations
@@ -404,7 +409,8 @@ def _normal_cdf(t):
 
 def forecast_model(analysis) -> ForecastModel:
     """The case's forecasts as a function of the named values (for studies: q, F at any estimate)."""
-    return ForecastModel(analysis.simulation, _specs(analysis.loaded, analysis.simulation.stages))
+    return ForecastModel(analysis.simulation, _specs(analysis.loaded, analysis.simulation.stages,
+                                                         analysis.simulation.survey.blocks))
 
 
 def _exceed(mean, std, alert):

@@ -1,0 +1,231 @@
+"""The observational method stage by stage: what a fit up to one stage forecasts for the readings
+of the stages after it, how the surveys of a stage score against the forecast made before they were
+read, and the trigger levels (TARP) with the probability of exceeding them.
+
+Forecast of a later reading (first order, eqn 55 propagated): x_f = P u(p*) at its stage (increments
+since the instrument's installation), model covariance A C_p A^t with A = dx/dp exact; what will be
+*read* adds the reading's error, C = A C_p A^t + C_x. A survey scored against it gives per reading
+z_i = (x_i - x_f,i) / sqrt(C_ii) (inside the 95 % band when |z| <= 1.96) and per survey of an
+instrument chi2 = r^t C^-1 r with m degrees of freedom.
+
+Trigger levels are on the magnitude of the movement (or force): P(|q| > L) for q ~ N(x_f, A C_p A^t)
+(the ground's movement, not a reading's error), the first-order band; a reading's status now is its
+latest survey's magnitude against the levels.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy import stats
+
+Z95 = 1.959963984540054
+STATUS = ("green", "amber", "red")
+
+
+@dataclass(frozen=True)
+class SurveyForecast:
+    """One instrument's survey (or a stage it will be read at) as forecast after the fit through
+    `fitted`: readings at the estimate, their model std and the std of a reading of them; measured
+    values and scores once the survey is read (NaN before)."""
+
+    fitted: str
+    stage: str
+    survey: str | None
+    instrument: str
+    kind: str
+    labels: tuple
+    forecast: np.ndarray
+    model_covariance: np.ndarray  # A C_p A^t: the model's band
+    reading_covariance: np.ndarray  # C_x of a survey of it
+    measured: np.ndarray | None = None
+
+    @property
+    def std_model(self) -> np.ndarray:
+        return np.sqrt(np.clip(np.diag(self.model_covariance), 0.0, None))
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """A C_p A^t + C_x: what will be read."""
+        return self.model_covariance + self.reading_covariance
+
+    def rows(self, rows, labels, survey, reading_covariance) -> "SurveyForecast":
+        """The forecast of a survey that kept `rows` of the instrument (readings marked missing dropped)."""
+        rows = list(rows)
+        return replace(self, survey=survey, labels=tuple(labels), forecast=self.forecast[rows],
+                       model_covariance=self.model_covariance[np.ix_(rows, rows)],
+                       reading_covariance=reading_covariance)
+
+    @property
+    def std_reading(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.covariance))
+
+    @property
+    def z(self) -> np.ndarray:
+        return (self.measured - self.forecast) / self.std_reading
+
+    @property
+    def chi2(self) -> float:
+        r = self.measured - self.forecast
+        return float(r @ np.linalg.solve(self.covariance, r))
+
+    @property
+    def p(self) -> float:
+        return float(stats.chi2.sf(self.chi2, len(self.forecast)))
+
+    @property
+    def inside(self) -> int:
+        return int(np.sum(np.abs(self.z) <= Z95))
+
+    def sentence(self) -> str:
+        """The survey's largest deviation from its forecast, in words."""
+        z = self.z
+        i = int(np.argmax(np.abs(z)))
+        lab = self.labels[i]
+        unit, f = ("kN", 1.0) if self.kind == "load_cell" else ("mm", 1e3)
+        where = _where(lab)
+        when = f"survey {self.survey}" if self.survey else f"stage {self.stage}"
+        side = "above" if z[i] > 0 else "below"
+        verdict = ("inside" if abs(z[i]) <= Z95 else "outside") + " its 95 % band"
+        return (f"{self.instrument} ({when}): {what(lab)} at {where} read {f * self.measured[i]:.3g} {unit}, "
+                f"{abs(z[i]):.1f} σ {side} what the fit through stage '{self.fitted}' forecast "
+                f"({f * self.forecast[i]:.3g} ± {Z95 * f * self.std_reading[i]:.2g} {unit}), {verdict}; "
+                f"{self.inside} of {len(z)} readings inside, χ² = {self.chi2:.1f} on {len(z)} (p = {self.p:.2g})")
+
+
+def what(lab) -> str:
+    return {"ux": "the horizontal displacement", "uy": "the vertical displacement (up +)",
+            "along": "the displacement along the line", "normal": "the displacement normal to the line",
+            "force": "the force"}.get(lab.component, lab.component)
+
+
+def _where(lab) -> str:
+    if lab.kind == "inclinometer":
+        return f"{-lab.y:g} m depth"
+    if lab.kind == "points":
+        return f"point {lab.station} (x {lab.x:g} m)"
+    if lab.kind == "load_cell":
+        return "the cell"
+    return f"station {lab.station} ({-lab.y:g} m depth)" if lab.x == 0 else f"station {lab.station}"
+
+
+def forecast_surveys(analysis, result, blocks, measured: np.ndarray | None = None) -> list[SurveyForecast]:
+    """What the fit `result` (of `analysis`) forecasts for the instrument blocks `blocks` (each an
+    instrument at a stage, increments since its installation), with `measured` their readings
+    stacked in block order (None: not read yet)."""
+    if not blocks:
+        return []
+    sim = analysis.simulation
+    names = result.parameters.names
+    values = analysis.values_at(result.fit.p)
+    with sim.surveying(list(blocks)) as view:
+        pred = view.predict(values, names, sensitivities=True)
+    Cp = result.reliability.covariance
+    fitted = analysis.loaded.until
+    out, r0 = [], 0
+    for b in blocks:
+        rows = slice(r0, r0 + b.m)
+        A = pred.A[rows]
+        model = A @ Cp @ A.T
+        out.append(SurveyForecast(fitted if isinstance(fitted, str) else str(fitted), b.stage, b.survey, b.name,
+                                  b.kind, tuple(b.labels), pred.x[rows].copy(), model, b.covariance,
+                                  None if measured is None else measured[rows].copy()))
+        r0 += b.m
+    return out
+
+
+def scored(forecasts: list[SurveyForecast], blocks, measured: np.ndarray) -> list[SurveyForecast]:
+    """The forecasts of surveys that have now been read, with their readings (matched by instrument,
+    stage and survey)."""
+    at, r0 = {}, 0
+    for b in blocks:
+        at[(b.name, b.stage, b.survey)] = (b, measured[r0:r0 + b.m])
+        r0 += b.m
+    out = []
+    for f in forecasts:
+        hit = at.get((f.instrument, f.stage, f.survey))
+        if hit is not None and len(hit[1]) == len(f.forecast):
+            out.append(replace(f, measured=hit[1].copy()))
+    return out
+
+
+# ------------------------------------------------------------------------------------ triggers
+def exceedance(mean, std, level) -> np.ndarray:
+    """P(|q| > level) for q ~ N(mean, std^2) (exact 0/1 where std = 0)."""
+    mean, std = np.asarray(mean, float), np.asarray(std, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        p = stats.norm.sf((level - mean) / std) + stats.norm.cdf((-level - mean) / std)
+    return np.where(std > 0, p, (np.abs(mean) > level).astype(float))
+
+
+def status_of(value: float, amber: float | None, red: float | None) -> str:
+    v = abs(value)
+    if red is not None and v > red:
+        return "red"
+    if amber is not None and v > amber:
+        return "amber"
+    return "green"
+
+
+@dataclass(frozen=True)
+class TriggerRow:
+    """One quantity against its trigger levels at one stage: the measured magnitude (now) or the
+    forecast with the probability of exceeding each level (the worst reading of an instrument)."""
+
+    quantity: str  # instrument or forecast name
+    when: str  # 'now', or the stage forecast
+    stage: str
+    where: str
+    value: float  # SI
+    std: float  # model std (0 for a measured value)
+    amber: float | None
+    red: float | None
+    p_amber: float
+    p_red: float
+    unit: str
+    measured: bool
+
+    @property
+    def status(self) -> str:
+        if self.measured:
+            return status_of(self.value, self.amber, self.red)
+        if self.red is not None and self.p_red >= 0.5:
+            return "red"
+        if (self.amber is not None and self.p_amber >= 0.5) or (self.red is not None and self.p_red >= 0.05):
+            return "amber"
+        return "green"
+
+
+def trigger_rows(name: str, when: str, stage: str, labels, mean, std, amber, red, unit: str,
+                 measured: bool = False) -> TriggerRow:
+    """The row of the reading most likely to exceed red (then amber; measured: the largest)."""
+    mean, std = np.asarray(mean, float), np.asarray(std, float)
+    if measured:
+        i = int(np.argmax(np.abs(mean)))
+        pa = float(abs(mean[i]) > amber) if amber is not None else math.nan
+        pr = float(abs(mean[i]) > red) if red is not None else math.nan
+    else:
+        pa_all = exceedance(mean, std, amber) if amber is not None else np.full(len(mean), np.nan)
+        pr_all = exceedance(mean, std, red) if red is not None else np.full(len(mean), np.nan)
+        key = pr_all if red is not None else pa_all
+        i = int(np.nanargmax(key)) if np.any(np.isfinite(key)) else 0
+        pa, pr = float(pa_all[i]), float(pr_all[i])
+    lab = labels[i] if labels else None
+    return TriggerRow(name, when, stage, _where(lab) if lab is not None else "", float(mean[i]), float(std[i]),
+                      amber, red, pa, pr, unit, measured)
+
+
+@dataclass(frozen=True)
+class UpdateStep:
+    """One step of `geoback update`: the fit through `stage` (its Identification), the forecasts it made
+    of the later surveys, and the surveys of this stage scored against the previous step's forecast."""
+
+    stage: str
+    result: object
+    surveys: tuple  # the sets fitted ('I1 advance@2026-03-05', ...)
+    ahead: tuple = ()  # SurveyForecast of every later survey (scored when read)
+    checks: tuple = ()  # SurveyForecast with measured: this stage's surveys against the previous forecast
+    triggers: tuple = ()  # TriggerRow
+    forecasts: object = None  # the case's forecasts at this step (worth.forecast.Forecasts)
+    extra: dict = field(default_factory=dict)
