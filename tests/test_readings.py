@@ -271,10 +271,10 @@ def test_depth_in_common_spellings(tmp_path, reference, header):
 
 def test_unknown_columns_named_ignored_or_mapped(tmp_path, reference):
     x0, _, rows = reference
-    text = csv_text([r + ("2024-03-01",) for r in rows], ("instrument", "station", "reading", "Datum"), (0, 1, 4, 5))
+    text = csv_text([r + ("2024-03-01",) for r in rows], ("instrument", "station", "reading", "Bemerkung"), (0, 1, 4, 5))
     m = _error(tmp_path, text)
-    assert "r.csv, line 1" in m and "found 'Datum', which geoback does not know" in m
-    np.testing.assert_array_equal(measured(paper_with_file(tmp_path, text, ignore_columns=["Datum"])), x0)
+    assert "r.csv, line 1" in m and "found 'Bemerkung', which geoback does not know" in m
+    np.testing.assert_array_equal(measured(paper_with_file(tmp_path, text, ignore_columns=["Bemerkung"])), x0)
     m = refusal(paper_with_file(tmp_path, text, ignore_columns=["Date"]))
     assert "ignore_columns[0]" in m and "'Date', which is none of its columns" in m
     m = refusal(paper_with_file(tmp_path, text, columns={"depth": "Tiefe"}))
@@ -506,7 +506,7 @@ def test_validate_names_instruments_without_readings_and_run_refuses_naming_them
 
 def test_validate_lists_every_readings_problem(tmp_path, reference):
     data = yaml.safe_load(PAPER.read_text())
-    for ins, text in zip(data["instruments"], ["station,reading\n1,0.1\n", "station,reading,Datum\n1,0.1,x\n"]):
+    for ins, text in zip(data["instruments"], ["station,reading\n1,0.1\n", "station,reading,Bemerkung\n1,0.1,x\n"]):
         ins.pop("readings")
         ins["readings_file"] = f"{ins['name']}.csv"
         (tmp_path / ins["readings_file"]).write_text(text)
@@ -515,7 +515,7 @@ def test_validate_lists_every_readings_problem(tmp_path, reference):
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 2, proc.stderr
     assert "instruments[0].readings_file: I1.csv: 'I1' has no reading for station 2" in lines[0]
-    assert "instruments[1].readings_file: X1.csv, line 1" in lines[1] and "'Datum'" in lines[1]
+    assert "instruments[1].readings_file: X1.csv, line 1" in lines[1] and "'Bemerkung'" in lines[1]
     run = run_cli(["run", path, "--out", tmp_path / "out"], tmp_path)
     assert run.returncode == 2 and run.stderr.strip() == lines[0] + " (and 1 more problem)"
 

@@ -585,7 +585,8 @@ class _Surveys:
         self.info: dict[tuple, dict] = {}
         if "stage" in roles:
             if ins.stage is not None:
-                raise fail(f"expected either a stage column in {table.path.name} or stage: in the case, found both")
+                raise err(("stage",), f"expected either a stage column in {table.path.name} or stage: in the case, "
+                                      f"found both")
             self.staged_by = "stage column"
         elif ins.stage is not None:
             self.staged_by = f"stage: {ins.stage} in the case"
@@ -778,7 +779,7 @@ def file_readings(table: Table, block: InstrumentBlock, ins, stages: list[str], 
     staged_by = surveys.staged_by
     comps = matcher.places.comps
     out, missing, details, ref_rows = {}, [], [], []
-    where_stage = (lambda s: "" if len(stages) == 1 and s == stages[0] else f" at {s}")
+    where_stage = (lambda s: s)  # ' at stage X', ' at stage X, survey D' or '' (one stage, no surveys)
 
     def collect(stage: str, rows: list) -> np.ndarray:
         """One survey's values in station order (NaN where marked missing) from its rows."""
@@ -835,12 +836,13 @@ def file_readings(table: Table, block: InstrumentBlock, ins, stages: list[str], 
     base = None
     if surveys.baseline is not None:
         b = surveys.baseline
-        base = collect(b.label, surveys.rows[b.key])
+        base = collect(f" in {b.label}", surveys.rows[b.key])
         details.append(f"baseline survey {b.survey} (lines {b.lines}) subtracted from every later survey; the "
                        f"readings are increments since {'before construction' if b.stage is None else 'stage ' + repr(b.stage)}")
     meta = {}
     for info in sets:
-        values = collect(info.label, surveys.rows[info.key])
+        values = collect("" if len(stages) == 1 and info.survey is None else f" at {info.label}",
+                         surveys.rows[info.key])
         if base is not None:
             values = values - base
         meta[info.name] = info
@@ -886,7 +888,7 @@ def _check_reference(table, line, block, matcher, fields, value, previous, stage
                    f"expected no row there")
     if previous is not None:
         raise fail(f"{table.where(line)}: the {end} of '{block.name}'"
-                   f"{'' if stage is None else f' at stage {stage}'} is given twice (also on line {previous})")
+                   f"{stage or ''} is given twice (also on line {previous})")
     if np.isfinite(value) and abs(value) > REFERENCE_TOLERANCE:
         raise fail(f"{table.where(line)}: {said} is the {end} of {block.kind} '{block.name}', which its readings are "
                    f"relative to: expected 0 there (within {REFERENCE_TOLERANCE:g} in SI units), found "
