@@ -128,7 +128,7 @@ def damage_figure(dm, res=None) -> Figure | None:
         else:
             bars.text(0.5, 0.5, "no probabilities\n(no parameter uncertainty)", ha="center", va="center",
                       transform=bars.transAxes)
-        bars.set_xticks(range(len(CATEGORIES)), [c.replace(" ", "\n", 1) for c in CATEGORIES], fontsize=7.5)
+        bars.set_xticks(range(len(CATEGORIES)), [_wrap(c, 9) for c in CATEGORIES], fontsize=7.5)
         bars.set_ylabel("probability [%]")
         bars.set_title(f"damage category after '{stages[-1]}'")
     fig.suptitle(f"{_head(res)}building damage, greenfield assessment (Burland 1995)")
