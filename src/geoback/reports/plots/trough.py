@@ -43,25 +43,11 @@ def trough_figure(tr, res=None) -> Figure | None:
         m, p = tr.measured.get(stage), tr.predicted.get(stage)
         if p is not None:
             ax.plot(p.x, 1e3 * p.s, color="0.55", lw=1.0, ls=(0, (4, 2)), label="model's surface settlement")
-            if p.determined:
-                lo, hi = p.curve - tr.z * p.curve_std, p.curve + tr.z * p.curve_std
-                ax.fill_between(p.curve_x, 1e3 * lo, 1e3 * hi, color=MODEL, alpha=0.2, lw=0)
-                ax.plot(p.curve_x, 1e3 * p.curve, color=MODEL, lw=1.8,
-                        label=f"model's trough: V_L {p.values['V_L']:.2f} %, i {p.values['i']:.1f} m "
-                              f"(95 % band)")
-            else:
-                notes.append(f"model's trough not determined: {p.reason}")
+            _fitted(ax, p, tr.z, MODEL, "model's", notes)
         if m is not None:
             ax.errorbar(m.x, 1e3 * m.s, yerr=1e3 * tr.z_measured * m.s_std, fmt="o", ms=4.5, color=MEASURED,
                         ecolor=MEASURED, elinewidth=1.0, capsize=2.5, label="measured (± 1.96 σ)", zorder=5)
-            if m.determined:
-                lo, hi = m.curve - tr.z_measured * m.curve_std, m.curve + tr.z_measured * m.curve_std
-                ax.fill_between(m.curve_x, 1e3 * lo, 1e3 * hi, color=MEASURED, alpha=0.15, lw=0)
-                ax.plot(m.curve_x, 1e3 * m.curve, color=MEASURED, lw=1.5,
-                        label=f"measured trough: V_L {m.values['V_L']:.2f} %, i {m.values['i']:.1f} m "
-                              f"(95 % band)")
-            else:
-                notes.append(f"measured trough not determined: {m.reason}")
+            _fitted(ax, m, tr.z_measured, MEASURED, "measured", notes)
         ax.axhline(0, color="0.6", lw=0.7)
         ax.invert_yaxis()  # settlement downwards
         ax.set_title(f"after stage '{stage}'")
@@ -76,6 +62,17 @@ def trough_figure(tr, res=None) -> Figure | None:
         ax.set_visible(False)
     fig.suptitle(f"{_head(res)}surface settlement trough per stage (Gaussian fits, 95 % bands)")
     return fig
+
+
+def _fitted(ax, t, z: float, colour: str, who: str, notes: list) -> None:
+    """A fitted trough with its 95 % band, or why it is not determined (into `notes`)."""
+    if not t.determined:
+        notes.append(f"{who} trough not determined: {t.reason}")
+        return
+    lo, hi = t.curve - z * t.curve_std, t.curve + z * t.curve_std
+    ax.fill_between(t.curve_x, 1e3 * lo, 1e3 * hi, color=colour, alpha=0.2 if who == "model's" else 0.15, lw=0)
+    ax.plot(t.curve_x, 1e3 * t.curve, color=colour, lw=1.8 if who == "model's" else 1.5,
+            label=f"{who} trough: V_L {t.values['V_L']:.2f} %, i {t.values['i']:.1f} m (95 % band)")
 
 
 def _wrap(text: str, width: int = 70) -> str:
