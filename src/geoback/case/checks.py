@@ -405,7 +405,89 @@ def _rest_problems(case: Case, construction: bool = True) -> list[tuple[tuple, s
     problems.extend(timeline_problems(case))
     problems.extend(forecast_problems(case))
     problems.extend(design_problems(case))
+    problems.extend(trough_problems(case))
+    problems.extend(building_problems(case))
     return problems
+
+
+def _model_span(g) -> tuple[float, float, str]:
+    """x range a building or a trough's axis may lie in: a half-model mirrored about its symmetry axis."""
+    if isinstance(g, Geometry) or g.model == "half":
+        return -g.width, g.width, "the half-model mirrored about its symmetry axis"
+    return -g.width / 2, g.width / 2, "the full model's width"
+
+
+def building_problems(case: Case) -> list[tuple[tuple, str]]:
+    """Buildings (``worth.damage``) lie on the model: within its width, their foundation above its
+    bottom and outside the tunnel, assessed at a stage of the case; names unique."""
+    from geoback.case.construction import stage_names
+
+    g, out = case.geometry, []
+    lo, hi, words = _model_span(g)
+    tol = 1e-9 * max(g.width, g.depth)
+    stages = stage_names(case)
+    names = [b.name for b in case.buildings]
+    for i, b in enumerate(case.buildings):
+        at = ("buildings", i)
+        if names.index(b.name) != i:
+            out.append((at + ("name",), f"expected unique building names, found '{b.name}' again "
+                                        f"(as in buildings[{names.index(b.name)}])"))
+        end = b.x_start + b.length
+        if not lo - tol <= b.x_start <= hi + tol:
+            out.append((at + ("x_start",), f"expected the building's start within the model (x between "
+                                           f"{number_text(lo)} and {number_text(hi)} m, {words}), found x_start "
+                                           f"{number_text(b.x_start)}: the building lies outside the model"))
+        elif end > hi + tol:
+            out.append((at + ("length",), f"expected the building within the model (x_start + length at most "
+                                          f"{number_text(hi)} m, {words}), found length {number_text(b.length)}: its "
+                                          f"end at x = {number_text(end)} m is beyond the model"))
+        if b.foundation_depth >= g.depth - tol:
+            out.append((at + ("foundation_depth",), f"expected a foundation above the model's bottom (depth less "
+                                                    f"than {number_text(g.depth)} m), found foundation_depth "
+                                                    f"{number_text(b.foundation_depth)}: deeper than the model"))
+        elif isinstance(g, Geometry) and abs(b.foundation_depth - g.axis_depth) < g.radius:
+            half = math.sqrt(g.radius ** 2 - (b.foundation_depth - g.axis_depth) ** 2)
+            if b.x_start < half and end > -half:
+                out.append((at + ("foundation_depth",), f"expected the foundation outside the excavated tunnel "
+                                                        f"({_tunnel_text(g)}), found foundation_depth "
+                                                        f"{number_text(b.foundation_depth)} across it"))
+        if b.stage is not None and b.stage not in stages:
+            out.append((at + ("stage",), f"expected one of the construction stages ({', '.join(stages)}), "
+                                         f"found '{b.stage}'"))
+    return out
+
+
+def trough_problems(case: Case) -> list[tuple[tuple, str]]:
+    """`trough:` names settlement-point instruments reading u_y at the surface, stages of the case and
+    an axis within the model."""
+    from geoback.case.construction import stage_names
+
+    t = case.trough
+    if t is None:
+        return []
+    g, out = case.geometry, []
+    by_name = {ins.name: ins for ins in case.instruments}
+    for j, n in enumerate(t.instruments or []):
+        ins = by_name.get(n)
+        if ins is None:
+            out.append((("trough", "instruments", j), f"expected the name of an instrument of the case "
+                                                      f"({', '.join(by_name) or 'none'}), found '{n}'"))
+        elif ins.kind != "points" or "uy" not in ins.components or not any(abs(p[1]) <= 1e-6 for p in ins.points):
+            out.append((("trough", "instruments", j), f"expected settlement points (kind points, reading uy, at "
+                                                      f"the ground surface y = 0), found {ins.kind} '{n}'"
+                                                      + (" without surface points reading uy"
+                                                         if ins.kind == "points" else "")))
+    stages = stage_names(case)
+    for j, st in enumerate(t.stages or []):
+        if st not in stages:
+            out.append((("trough", "stages", j), f"expected one of the construction stages ({', '.join(stages)}), "
+                                                 f"found '{st}'"))
+    if t.axis_x is not None:
+        lo, hi, words = _model_span(g)
+        if not lo <= t.axis_x <= hi:
+            out.append((("trough", "axis_x"), f"expected the axis within the model (x between {number_text(lo)} and "
+                                              f"{number_text(hi)} m), found {number_text(t.axis_x)}"))
+    return out
 
 
 def expand_candidates(design) -> list[tuple[int, object]]:

@@ -872,6 +872,37 @@ class Design(Strict):
     candidates: list[Candidate] = Field(min_length=1, description="candidate instruments")
 
 
+class TroughSettings(Strict):
+    """`trough:`: what the settlement trough (``worth.trough``) is fitted to and read against; every
+    field optional (default: every settlement-point instrument reading u_y at the surface, every stage,
+    x0 at the symmetry axis or fitted, z0 the tunnel axis' depth or the excavated centroid's)."""
+
+    instruments: Optional[list[Annotated[str, Field(pattern=NAME)]]] = Field(
+        None, description="settlement-point instruments (kind points, u_y at the surface) whose readings are fitted")
+    stages: Optional[list[StageName]] = Field(None, description="stages to fit the trough of (default: every stage)")
+    axis_x: Optional[Length] = Field(None, description="full model: x of the trough's centre x0 [m], fixed "
+                                                       "(default: fitted, or the excavated opening's centre)")
+    z0: Optional[PositiveLength] = Field(None, description="depth z0 for K = i / z0 [m] (default: the tunnel "
+                                                           "axis' depth, or the excavated ground's centroid)")
+    extent: Optional[PositiveLength] = Field(None, description="the model's profile is fitted from the axis out "
+                                                               "to this distance [m] (default: the farthest "
+                                                               "settlement point read, else 2.5 z0)")
+
+
+class Building(Strict):
+    """A building as a line at its foundation level, assessed for damage on the greenfield movement
+    (``worth.damage``: Burland & Wroth 1974, Burland 1995)."""
+
+    name: str = Field(pattern=NAME, description="building name")
+    x_start: Length = Field(description="x of the building's end nearer to smaller x [m]")
+    length: PositiveLength = Field(description="length of the building across the tunnel [m]")
+    height: PositiveLength = Field(description="height of the building's facade above the foundation [m]")
+    foundation_depth: NonNegativeLength = Field(0.0, description="depth of the foundation below the surface [m]")
+    E_over_G: Positive = Field(2.6, description="E/G of the deep beam (2.6: isotropic masonry; 12.5: frames)")
+    nu: Num = Field(0.3, ge=0.0, lt=0.5, description="Poisson's ratio in the combined diagonal strain")
+    stage: Optional[StageName] = Field(None, description="the stage to assess (default: every stage)")
+
+
 class Output(Strict):
     dir: Optional[str] = Field(None, description="results directory (default results/<name>)")
     vtu: Annotated[bool, BeforeValidator(_flag)] = True
@@ -896,4 +927,8 @@ class Case(Strict):
         default_factory=list, description="quantities to forecast at the estimate with their 95 % band (points, "
                                           "lines, chords, an instrument's next readings, the lining's forces)")
     design: Optional[Design] = Field(None, description="candidate instruments for `geoback design`")
+    trough: Optional[TroughSettings] = Field(
+        None, description="the settlement trough's fit (optional: tunnels with surface settlement readings get one)")
+    buildings: list[Building] = Field(
+        default_factory=list, description="buildings assessed for damage on the greenfield movement (a line each)")
     output: Output = Output()

@@ -83,6 +83,28 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
                 say(f"walls and supports: not written: {exc}")
             res = replace(res, caveats=tuple(res.caveats) + (Caveat("walls-skipped", f"walls.csv and supports.csv "
                                                                                       f"not written: {exc}"),))
+    exploration, res = _trough_and_damage(analysis, res, exploration, say)
     write_run(res, Path(out), exploration, plots=plots, readings=lines)
     return res
 
+
+
+def _trough_and_damage(analysis, res, exploration, say):
+    """The settlement troughs (trough.csv, the report's section, trough.png) and the buildings' damage
+    (damage.csv, its section, damage.png) at the estimate, where the case has them."""
+    from geoback.inference.explore import Exploration
+    from geoback.worth import damage, trough
+
+    case = analysis.loaded.case
+    found = {}
+    if trough.wanted(case, res.data.labels):
+        if say is not None:
+            say("settlement trough: Gaussian fits to the measured and the model's surface settlement per stage")
+        found["trough"] = trough.of_result(analysis, res)
+    if case.buildings:
+        if say is not None:
+            say(f"building damage (greenfield): {', '.join(b.name for b in case.buildings)}")
+        found["damage"] = damage.of_result(analysis, res)
+    if found:
+        exploration = replace(exploration or Exploration(), **found)
+    return exploration, res

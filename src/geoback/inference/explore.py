@@ -101,6 +101,9 @@ class Exploration:
     # (or a non-linear run); None when not probed
     walls: object | None = None  # worth.walls.WallsAndSupports at the estimate with their bands (cases with
     # walls; set by `geoback run`, which may call worth: this room may not)
+    trough: object | None = None  # worth.trough.Troughs: measured and model settlement troughs per stage
+    # (tunnels with surface settlement readings or a `trough:` section; set by `geoback run`)
+    damage: object | None = None  # worth.damage.Damage: the buildings' greenfield damage (set by `geoback run`)
 
 
 def other_method(method: str) -> str:

@@ -71,6 +71,14 @@ def summary(res, exploration=None, readings=()) -> dict:
         from geoback.reports.walls import as_dict as walls_dict
 
         out["walls"] = walls_dict(exploration.walls)
+    if getattr(exploration, "trough", None) is not None:
+        from geoback.reports.trough import trough_dict
+
+        out["trough"] = trough_dict(exploration.trough)
+    if getattr(exploration, "damage", None) is not None:
+        from geoback.reports.trough import damage_dict
+
+        out["damage"] = damage_dict(exploration.damage)
     if res.forecasts is not None:
         from geoback.reports.forecast_report import as_dict
 
@@ -157,6 +165,11 @@ def report_text(res, exploration=None, readings=()) -> str:
         from geoback.reports.walls import report_section as walls_section
 
         text += walls_section(exploration.walls)
+    if getattr(exploration, "trough", None) is not None or getattr(exploration, "damage", None) is not None:
+        from geoback.reports.trough import damage_section, trough_section
+
+        text += trough_section(getattr(exploration, "trough", None)) + damage_section(getattr(exploration, "damage",
+                                                                                                     None))
     if res.forecasts is not None:
         from geoback.reports.forecast_report import report_section
 
@@ -329,6 +342,14 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
         from geoback.reports.walls import write_walls
 
         write_walls(exploration.walls, out)
+    if exploration is not None and getattr(exploration, "trough", None) is not None:
+        from geoback.reports.trough import write_trough
+
+        write_trough(exploration.trough, out)
+    if exploration is not None and getattr(exploration, "damage", None) is not None:
+        from geoback.reports.trough import write_damage
+
+        write_damage(exploration.damage, out)
     if res.forecasts is not None:
         from geoback.reports.forecast_report import HEADER, forecast_rows
 

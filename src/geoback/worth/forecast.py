@@ -486,6 +486,13 @@ def _forecast(model: ForecastModel, analysis, result, n: int, seconds: float, se
     return out
 
 
+def parameter_draws(C: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """n draws (n, k) of dp ~ N(0, C) (C a parameters' covariance; by its eigenvectors, so a singular C
+    draws along what it determines): the parameter sets of a linearised Monte Carlo (``worth.damage``)."""
+    w, V = np.linalg.eigh(0.5 * (C + C.T))
+    return rng.standard_normal((n, len(w))) @ (V * np.sqrt(np.clip(w, 0, None))).T
+
+
 def _sampled(out: Forecasts, model: ForecastModel, analysis, result, n: int, budget: float, seed: int, progress):
     """The sampling check: the forecasts at draws from N(p, C_p) (ln p for log parameters)."""
     params, p, Cp = result.parameters, result.fit.p, result.reliability.covariance

@@ -11,6 +11,8 @@
 - ``lining``: thrust, bending moment and shear around the lining per construction stage (models
   with a lining only);
 - ``plastic``: the plastic zone around the tunnel after every stage (ground that can yield only);
+- ``trough``: the settlement trough per stage, measured and the model's, with their bands; ``damage``:
+  the buildings over the greenfield settlement and their damage categories' probabilities;
 - ``walls``: each retaining wall's deflection, bending moment and shear against depth per stage, and
   the props' and anchors' forces per stage (``supports``) (cases with walls only).
 
@@ -37,18 +39,19 @@ from geoback.reports.plots.measured import measured_vs_predicted_figure
 from geoback.reports.plots.mesh import mesh_figure
 from geoback.reports.plots.objective import objective_contours_figure
 from geoback.reports.plots.plastic import plastic_zone_figure
+from geoback.reports.plots.trough import damage_figure, trough_figure
 from geoback.reports.plots.walls import supports_figure, walls_figure
 
 FIGURES = ("objective_contours", "convergence", "information_density", "instruments", "field",
            "measured_vs_predicted", "mesh")
-OPTIONAL = ("lining", "plastic_zone", "walls", "supports")  # figures of what only some models have, built when
+OPTIONAL = ("lining", "plastic_zone", "walls", "supports", "trough", "damage")  # figures of what only some models have, built when
 # the exploration holds it
 FORMATS = ("png", "svg")
 NEEDS = {"objective_contours": ("slice", "other"), "convergence": ("other",), "information_density": (),
          "instruments": ("profiles",), "field": ("field", "profiles"), "measured_vs_predicted": (),
          "mesh": ("field",),
          "lining": ("lining",), "plastic_zone": ("plastic_zone",),
-         "walls": (), "supports": ()}  # what each reads from the exploration (walls: set by `geoback run`)
+         "walls": (), "supports": (), "trough": (), "damage": ()}  # what each reads from the exploration (walls: set by `geoback run`)
 _BUILD = {"objective_contours": objective_contours_figure, "convergence": convergence_figure,
           "information_density": lambda res, exploration: information_density_figure(res),
           "instruments": instruments_figure, "field": field_figure,
@@ -58,7 +61,9 @@ _BUILD = {"objective_contours": objective_contours_figure, "convergence": conver
           "plastic_zone": lambda res, exploration: (plastic_zone_figure(exploration.plastic_zone, res)
                                                     if exploration.plastic_zone else None),
           "walls": lambda res, exploration: walls_figure(getattr(exploration, "walls", None), res),
-          "supports": lambda res, exploration: supports_figure(getattr(exploration, "walls", None), res)}
+          "supports": lambda res, exploration: supports_figure(getattr(exploration, "walls", None), res),
+          "trough": lambda res, exploration: trough_figure(getattr(exploration, "trough", None), res),
+          "damage": lambda res, exploration: damage_figure(getattr(exploration, "damage", None), res)}
 HOLDS = {"supports": lambda exploration: getattr(getattr(exploration, "walls", None), "supports", None)}
 
 
