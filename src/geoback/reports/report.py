@@ -350,4 +350,7 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
         figures = list(dict.fromkeys(p.stem for p in plot_run(res, exploration, out)))
     text = report_text(res, exploration, readings, figures)
     write_atomic(out / "report.md", text)
+    from geoback.reports.html import write_html
+
+    write_html(out / "report.html", text, out, res)
     write_json(out / "summary.json", summary(res, exploration, readings))
