@@ -18,7 +18,8 @@ UNIT_TEXT = {"kN/m3": "kN/m³", "deg": "°", "-": "", "": ""}
 STRENGTH = ("c", "phi", "psi", "tension")  # a mohr-coulomb layer's strength (schema.MC_FIELDS)
 WORDS = {"E": "E (Young's modulus)", "nu": "ν (Poisson's ratio)", "K0": "K0 (earth pressure at rest)",
          "gamma": "γ (unit weight)", "c": "c′ (cohesion)", "phi": "φ′ (friction angle)",
-         "psi": "ψ (dilation angle)", "tension": "tension cut-off"}
+         "psi": "ψ (dilation angle)", "tension": "tension cut-off", "k": "k (axial stiffness per metre run)",
+         "preload": "preload (per metre run)"}
 UNITS = {"E": "kPa", "nu": "-", "K0": "-", "gamma": "kN/m3", "c": "kPa", "phi": "deg", "psi": "deg",
          "tension": "kPa"}
 
@@ -87,9 +88,10 @@ def geometry_lines(case) -> list[str]:
     half = g.model == "half"
     out = [(f"- half-model, symmetric about x = 0: {number(g.width)} m wide from the symmetry axis"
             if half else f"- full model: {number(g.width)} m wide (x from {number(-g.width / 2)} to "
-                         f"{number(g.width / 2)} m)") + f", {number(g.depth)} m deep (plane strain)"]
+                         f"{number(g.width / 2)} m)") + f", {number(g.depth)} m deep (plane strain; the bottom fixed, the "
+                                           "sides on rollers)"]
     for op in g.openings:
-        x0, y0, x1, y1 = polygon(op).bounds
+        x0, y0, x1, y1 = (round(v, 6) + 0.0 for v in polygon(op).bounds)  # (no -0, no sampling noise)
         if op.shape == "circle":
             shape = f"circle of radius {number(op.radius)} m about {_point(op.centre)}"
         elif op.shape == "horseshoe":
@@ -97,7 +99,7 @@ def geometry_lines(case) -> list[str]:
                      f"centred at {_point(op.centre)}")
         else:
             shape = f"polygon of {sum(1 for v in op.boundary if isinstance(v, (tuple, list)))} corners"
-        extent = f"from {number(-y1, 4)} to {number(-y0, 4)} m depth, x from {number(x0, 4)} to {number(x1, 4)} m"
+        extent = f"from {number(0.0 - y1, 4)} to {number(0.0 - y0, 4)} m depth, x from {number(x0, 4)} to {number(x1, 4)} m"
         parts = f"; in parts {', '.join(p.name for p in op.parts)}" if op.parts else "; excavated whole"
         out.append(f"- opening '{op.name}': {shape}, {extent}{parts}")
     return out
@@ -169,7 +171,8 @@ def construction_lines(res, claims: Claims) -> list[str]:
     case = res.case
     seq = _sequence(case)
     stages = seq.describe() if seq is not None else circular_stage_lines(case)
-    out = [f"- {line}" for line in stages]
+    out = ["As the case states them (the values the fit identified are in bold in the tables below):", ""]
+    out += [f"- {line}" for line in stages]
     structures = structure_rows(case, seq, claims)
     if structures:
         out += ["", "Linings, walls, props and anchors:", "",
@@ -286,7 +289,8 @@ def mesh_line(res) -> str:
     order = ("6-node quadratic triangles" if m.order == 2 else "3-node linear triangles")
     sizes = []
     if m.size_tunnel is not None:
-        sizes.append(f"{number(m.size_tunnel)} m at the openings")
+        at = "at the openings' walls" if hasattr(res.case.geometry, "openings") else "at the tunnel wall"
+        sizes.append(f"{number(m.size_tunnel)} m {at}")
     if m.size_far is not None:
         sizes.append(f"{number(m.size_far)} m far away")
     return (f"- {res.elements:,} elements ({order}), {res.dofs // 2:,} nodes, {res.dofs:,} degrees of freedom"
