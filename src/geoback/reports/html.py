@@ -192,9 +192,20 @@ def _toc_html(toc) -> str:
     return "".join(out)
 
 
+DIAGNOSIS_HOW_TO_READ = (
+    "This report gives a diagnosis of a back-analysis: where the fitted model fails to explain the instruments' "
+    "readings, which additions to the model (hypotheses) were tried in rounds, how much better each fits (χ², "
+    "AIC) and which was accepted, with every parameter before and after. Read the verdict at the top first. "
+    "Moduli are in MPa, displacements in mm. Every number is also in diagnosis.json beside this report; "
+    "amended.yaml, where written, is the case amended to go on with.")
+
+
 def html_report(markdown: str, folder: Path, name: str, when: str, version: str = __version__,
-                warnings: int = 0, kind: str = "back-analysis report") -> str:
-    """The HTML page of a report's Markdown (module docstring); images are read from `folder`."""
+                warnings: int | None = 0, kind: str = "back-analysis report", how_to_read: str = HOW_TO_READ) -> str:
+    """The HTML page of a report's Markdown (module docstring); images are read from `folder`.
+    `warnings`: how many the result carries (the text before the first section, where report.md
+    writes them, is boxed as such; 0 says there are none); None: the report counts none, its opening
+    text is shown as it is."""
     md = MarkdownIt("commonmark", {"html": False, "typographer": False}).enable("table")
     tokens = md.parse(markdown)
     title, toc = _headings(tokens)
@@ -205,7 +216,9 @@ def html_report(markdown: str, folder: Path, name: str, when: str, version: str 
     body = md.renderer.render(tokens[first:], md.options, {})
     body = body.replace("<table>", "<div class=\"table\"><table>").replace("</table>", "</table></div>")
     preamble = preamble.replace("<table>", "<div class=\"table\"><table>").replace("</table>", "</table></div>")
-    if warnings:
+    if warnings is None:
+        notice = f"<div class=\"opening\">{preamble}</div>" if preamble else ""
+    elif warnings:
         notice = f"<div class=\"notice\" role=\"alert\">{preamble}</div>"
     else:
         notice = ("<div class=\"notice ok\"><p><strong>No warnings</strong>: the result carries no caveat.</p>"
@@ -230,7 +243,7 @@ def html_report(markdown: str, folder: Path, name: str, when: str, version: str 
 <table class="meta">{meta}</table>
 </header>
 {notice}
-<section class="howto"><h2 id="how-to-read-this-report">How to read this report</h2><p>{HOW_TO_READ}</p></section>
+<section class="howto"><h2 id="how-to-read-this-report">How to read this report</h2><p>{how_to_read}</p></section>
 {_toc_html(toc)}
 <main>
 {body}</main>
@@ -248,10 +261,11 @@ def run_date() -> str:
 
 
 def write_html(path: Path, markdown: str, folder: Path, res=None, name: str | None = None,
-               kind: str = "back-analysis report") -> None:
+               kind: str = "back-analysis report", how_to_read: str = HOW_TO_READ) -> None:
     """Write report.html (atomically, into the run's result set) from the report's Markdown, with the
     images it links from `folder` embedded; `res` (an Identification) gives the case's name and the
-    number of warnings."""
+    number of warnings (without it, none are counted)."""
     name = name or (res.name if res is not None else Path(folder).name)
-    warnings = len(getattr(res, "caveats", ()) or ())
-    write_atomic(path, html_report(markdown, folder, name, run_date(), warnings=warnings, kind=kind))
+    warnings = len(getattr(res, "caveats", ()) or ()) if res is not None else None
+    write_atomic(path, html_report(markdown, folder, name, run_date(), warnings=warnings, kind=kind,
+                                   how_to_read=how_to_read))
