@@ -121,6 +121,8 @@ def test_report_html_renders_in_headless_chromium(tmp_path):
     markdown = (out / "report.md").read_text(encoding="utf-8")
     pngs = sorted(p.name for p in out.glob("*.png"))
     assert pngs and all(f"]({name})" in markdown for name in pngs)  # report.md links every figure written
+    toc = re.search(r'<nav class="toc".*?</nav>', text, re.S).group(0)
+    assert all(f">{title}</a>" in toc for title in sections(markdown))  # every section in the contents
 
     t0 = time.perf_counter()
     errors, requests, failed = [], [], []
