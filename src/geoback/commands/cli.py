@@ -351,7 +351,7 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
             typer.echo(verdict(d))
         amended = ", amended.yaml (the case with the accepted extensions: `geoback run` it to go on)" \
             if d.accepted else ""
-        typer.echo(f"-> {folder}/diagnosis.md, diagnosis.json{amended}", err=True)
+        typer.echo(f"-> {folder}/diagnosis.md, diagnosis.html, diagnosis.json{amended}", err=True)
         if _cut_short("the diagnosis"):
             raise typer.Exit(1)
 

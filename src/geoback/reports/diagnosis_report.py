@@ -473,8 +473,10 @@ def diagnosis_json(d) -> dict:
 def write_diagnosis(d, out: Path, plots: bool = True, exploration=None) -> None:
     """diagnosis.md, diagnosis.json and (plots) diagnosis.png/.svg, replacing the previous set in `out`
     as a whole; `exploration` gives the figure the model along each instrument at the final fit."""
+    from geoback.reports.html import DIAGNOSIS_HOW_TO_READ, write_html
+
     with result_set(out, "diagnose") as staging:
-        write_atomic(staging / "diagnosis.md", diagnosis_text(d))
+        text = diagnosis_text(d)
         write_json(staging / "diagnosis.json", diagnosis_json(d))
         if d.accepted and d.loaded is not None:  # paths in it relative to `out`, where it ends up
             write_atomic(staging / AMENDED, amended_text(d, Path(out)))
@@ -482,3 +484,9 @@ def write_diagnosis(d, out: Path, plots: bool = True, exploration=None) -> None:
             from geoback.reports.plots.diagnosis import plot_before_after
 
             plot_before_after(d, staging, exploration)
+            what = "Measured and computed readings along every instrument, before and after the diagnosis"
+            text += f"\n## Figures\n\n**Figure 1.** {what} (diagnosis.png; vector graphics: diagnosis.svg).\n\n" \
+                    f"![Figure 1: {what}](diagnosis.png)\n"
+        write_atomic(staging / "diagnosis.md", text)
+        write_html(staging / "diagnosis.html", text, staging, name=d.case, kind="diagnosis report",
+                   how_to_read=DIAGNOSIS_HOW_TO_READ)

@@ -97,14 +97,19 @@ def _cv(value: float, std: float) -> str:
     return f" ({100 * std / abs(value):.0f} %)" if std / abs(value) >= 0.01 else f" ({100 * std / abs(value):.2g} %)"
 
 
-def report_text(res, exploration=None, readings=()) -> str:
-    """A one-page report in the spirit of lmfit's fit_report, warnings first; the plastic zone at the
-    estimate when the exploration holds it; `readings`: how the readings were matched, one line per
-    instrument (observation.readings.CaseReadings.lines)."""
+def report_text(res, exploration=None, readings=(), figures=()) -> str:
+    """A report in the spirit of lmfit's fit_report, warnings first, then the model fitted
+    (``model.py``) and the fit; the plastic zone at the estimate when the exploration holds it;
+    `readings`: how the readings were matched, one line per instrument
+    (observation.readings.CaseReadings.lines); `figures`: the names of the figures the run wrote
+    (``plots.plot_run``), each linked (as its PNG) under "## Figures"."""
     f, rel, params = res.fit, res.reliability, res.parameters
     lines = [f"# geoback fit report: {res.name}", ""]
     if res.caveats:
         lines += ["**Warnings**", ""] + [f"- [{c.code}] {c.message}" for c in res.caveats] + [""]
+    from geoback.reports.model import model_section
+
+    lines += model_section(res) + ["## The fit", ""]
     lines += [f"- status: **{res.status}** ({f.reason})",
               f"- method: {f.method}, {f.iterations} iterations, {res.counts['factorisations']} factorisation(s), "
               f"{res.counts['solves']} solves",
@@ -159,7 +164,7 @@ def report_text(res, exploration=None, readings=()) -> str:
     zone = getattr(exploration, "plastic_zone", None)
     if zone is not None:
         lines += zone.lines()
-    lines += figure_lines(res, exploration)
+    lines += figure_lines(res, exploration, figures)
     text = "\n".join(lines) + "\n"
     if getattr(exploration, "walls", None) is not None:
         from geoback.reports.walls import report_section as walls_section
@@ -177,18 +182,28 @@ def report_text(res, exploration=None, readings=()) -> str:
     return text
 
 
-def figure_lines(res, exploration) -> list[str]:
-    """What the figures' objective map shows (the model's own or linearised) and why a path is missing."""
+def figure_lines(res, exploration, figures=()) -> list[str]:
+    """"## Figures": every figure the run wrote (`figures`: their names, as ``plots.plot_run`` wrote
+    them), linked as its PNG under a caption (``plots.caption``); what the objective map shows (the
+    model's own or linearised) and why a path is missing."""
     slc = getattr(exploration, "slice", None)
-    if slc is None:
+    if slc is None and not figures:
         return []
-    from geoback.inference.explore import other_method
-    from geoback.reports.plots.common import METHOD_NAMES
+    out = ["", "## Figures"]
+    if slc is not None:
+        from geoback.inference.explore import other_method
+        from geoback.reports.plots.common import METHOD_NAMES
 
-    out = ["", f"Figures: the objective map (objective_contours.png) shows {slc.words()}."]
-    note = getattr(exploration, "other_note", "")
-    if exploration.other is None and note:
-        out.append(f"{METHOD_NAMES.get(other_method(res.fit.method), 'The other method')} {note}.")
+        out += ["", f"The objective map (objective_contours.png) shows {slc.words()}."]
+        note = getattr(exploration, "other_note", "")
+        if exploration.other is None and note:
+            out.append(f"{METHOD_NAMES.get(other_method(res.fit.method), 'The other method')} {note}.")
+    if figures:
+        from geoback.reports.plots import caption
+
+        for k, name in enumerate(figures, 1):
+            out += ["", f"**Figure {k}.** {caption(name)} ({name}.png; vector graphics: {name}.svg).", "",
+                    f"![Figure {k}: {caption(name)}]({name}.png)"]
     return out
 
 
@@ -354,9 +369,14 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
         from geoback.reports.forecast_report import HEADER, forecast_rows
 
         write_csv(out / "forecast.csv", HEADER, forecast_rows(res.forecasts))
+    figures = []
     if plots:
         from geoback.reports.plots import plot_run
 
-        plot_run(res, exploration, out)
-    write_atomic(out / "report.md", report_text(res, exploration, readings))
+        figures = list(dict.fromkeys(p.stem for p in plot_run(res, exploration, out)))
+    text = report_text(res, exploration, readings, figures)
+    write_atomic(out / "report.md", text)
+    from geoback.reports.html import write_html
+
+    write_html(out / "report.html", text, out, res)
     write_json(out / "summary.json", summary(res, exploration, readings))

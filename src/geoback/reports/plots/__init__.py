@@ -67,6 +67,30 @@ _BUILD = {"objective_contours": objective_contours_figure, "convergence": conver
 HOLDS = {"supports": lambda exploration: getattr(getattr(exploration, "walls", None), "supports", None)}
 
 
+CAPTIONS = {
+    "objective_contours": "The objective J over the two most correlated parameters, with the paths of the fit",
+    "convergence": "Convergence: J and the parameters at each iteration",
+    "information_density": "Information density: which readings determine which",
+    "instruments": "Measured and computed readings along every instrument (±2σ)",
+    "field": "Displacements at the estimate (deformed mesh) with the instruments",
+    "measured_vs_predicted": "Every reading: measured against computed at the estimate",
+    "mesh": "The finite-element mesh by layer, with the instruments' stations",
+    "lining": "Thrust, bending moment and shear in the lining at each stage",
+    "plastic_zone": "The plastic zone after each stage",
+    "walls": "Retaining walls: deflection, bending moment and shear against depth at each stage",
+    "supports": "Forces in the props and anchors at each stage",
+}
+
+
+def caption(name: str) -> str:
+    """What a figure of the run shows, in a few words (report.md's figure captions)."""
+    if name in CAPTIONS:
+        return CAPTIONS[name]
+    if name.startswith("forecast_"):
+        return f"Forecast '{name[len('forecast_'):]}' with its 95 % band"
+    return name.replace("_", " ").capitalize()
+
+
 def exploration_for(names=FIGURES + OPTIONAL) -> tuple[str, ...]:
     """What ``explore`` must compute for these figures."""
     return tuple(sorted({w for n in names for w in NEEDS[n]}))
