@@ -141,7 +141,7 @@ def test_update_ends_at_the_joint_fit_and_scores_each_stage_against_the_previous
         assert c.chi2 == pytest.approx(float((c.measured - f.forecast) @ np.linalg.solve(C, c.measured - f.forecast)))
     out = tmp_path / "upd"
     for name in ("history.csv", "forecast_checks.csv", "forecasts_ahead.csv", "triggers.csv", "report.md",
-                 "summary.json"):
+                 "report.html", "summary.json"):
         assert (out / name).is_file(), name
     text = (out / "report.md").read_text()
     assert "the stage in force on its date" in text and "σ" in text and "Trigger levels" in text

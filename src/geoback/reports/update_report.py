@@ -209,4 +209,13 @@ def write_update(steps, loaded, out: Path, until, plots: bool = False) -> None:
             text += "\n## Figures\n\n" + "\n".join(f"![{k.replace('_', ' ')}]({k}.png)" for k, v in figs.items()
                                                    if v is not None) + "\n"
         write_atomic(staging / "report.md", text)
+        from geoback.reports.html import write_html
+
+        write_html(staging / "report.html", text, staging, steps[-1].result, name=loaded.case.name,
+                   kind="update as construction proceeds",
+                   how_to_read="Read the parameters stage by stage first, then how each stage's surveys scored "
+                               "against the forecast made before they were read (inside the 95 % band about 95 % "
+                               "of the time when the model and the stated errors hold), then the trigger table: "
+                               "the status now and the probability that each level is exceeded at the next stage "
+                               "and at the end.")
         write_json(staging / "summary.json", update_summary(steps, until))
