@@ -365,8 +365,8 @@ class _Instrument(Strict):
         None, description="CSV or text file with the readings (relative to the case file): a header row with a "
                           "reading column (reading, value, measured, displacement; settlement: positive down), a "
                           "position column (station, point, depth, distance from the reference end, x, y) unless "
-                          "the file lists one instrument in station order, and optionally instrument, component and "
-                          "stage columns; a unit in the header such as 'reading [mm]'. Every column is used, mapped "
+                          "the file lists one instrument in station order, and optionally instrument, component, "
+                          "stage, date and survey columns (several dated surveys: see baseline); a unit in the header such as 'reading [mm]'. Every column is used, mapped "
                           "(`columns`) or listed in `ignore_columns`; a reading written '', -, n/a or NaN is missing "
                           "and dropped with its row and column of C_x")
     readings_unit: Optional[Literal["m", "mm", "cm", "rad", "mrad", "1/m", "kN", "MN"]] = Field(
