@@ -22,7 +22,7 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
     from geoback.observation.instruments import case_blocks
     from geoback.observation.readings import survey_blocks
     from geoback.reports.update_report import write_update
-    from geoback.worth.updating import UpdateStep, forecast_surveys, scored
+    from geoback.worth.updating import UpdateStep, forecast_surveys, scored, sequential_step
 
     say = say or (lambda text: None)
     stages = stage_names(loaded.case)
@@ -33,7 +33,7 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
     read = [s for s in stages if any(b.stage == s for b in blocks)]
     since = {b.name: b.since for b in blocks}
     geometry = [replace(g, since=since.get(g.name, g.since)) for g in case_blocks(loaded)]
-    steps, mesh, previous = [], None, None
+    steps, mesh, previous, previous_blocks = [], None, None, []
     for k, stage in enumerate(read):
         last = k == len(read) - 1
         step_cut = until if (last and until is not None and not isinstance(until, str)) else stage
@@ -56,6 +56,16 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
             checks = tuple(scored(_per_survey(previous.ahead, mine), mine, values))
             for c in checks:
                 say(f"  {c.sentence()}")
+        sequential = None
+        if previous is not None:  # the check: the previous posterior as the prior of the new surveys alone
+            old = {(b.name, b.set_name) for b in previous_blocks}
+            new = [b for b in fitted if (b.name, b.set_name) not in old]
+            prev = previous.result
+            sequential = sequential_step(analysis, new, _measured_of(analysis, new), prev.fit.p,
+                                         prev.reliability.covariance, res.fit.p, res.reliability.std)
+            say(f"  sequential Bayesian update (the previous posterior as prior): "
+                + ", ".join(f"{n} {d:+.2g} σ" for n, d in zip(res.parameters.names, sequential.difference_std))
+                + " from the joint refit")
         forecasts = None
         if loaded.case.forecasts:
             from geoback.worth.forecast import forecast, unusable_estimate
@@ -63,10 +73,10 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
             if not unusable_estimate(res):
                 forecasts = forecast(analysis, res, draws=draws if last else 0)
         step = UpdateStep(stage, res, tuple(f"{b.name} {b.set_name}" for b in fitted), tuple(ahead), checks,
-                          forecasts=forecasts)
+                          forecasts=forecasts, sequential=sequential)
         step = replace(step, triggers=tuple(_triggers(loaded, analysis, step, stages)))
         steps.append(step)
-        previous = step
+        previous, previous_blocks = step, fitted
     write_update(steps, loaded, Path(out), until, plots=plots)
     return steps
 

@@ -138,6 +138,15 @@ def update_text(steps, loaded, until) -> str:
             cells.append(f"{number(f * res.fit.p[i], 4)}{u} [{number(f * lo[i], 3)}, {number(f * hi[i], 3)}]")
         lines.append(f"| {s.stage} | {len(s.surveys)} | " + " | ".join(cells) + " |")
     lines += ["", "Every step's estimate, std and 95 % interval: history.csv (and history.png with --plots).", ""]
+    seq = [s for s in steps if s.sequential is not None]
+    if seq:
+        worst = max(float(np.max(np.abs(s.sequential.difference_std))) for s in seq)
+        lines += [f"Check: the sequential Bayesian update (each step's posterior, linearised, as the prior of the next "
+                  f"step's new surveys alone) ends {worst:.2g} σ or less from the joint refit at every step "
+                  f"({', '.join(f'{n} {d:+.2g} σ' for n, d in zip(last.result.parameters.names, seq[-1].sequential.difference_std))} "
+                  f"at the last). They are the same for a model linear in its parameters; the difference is the "
+                  f"curvature the linearisation leaves out, and the joint refit, which has none of it, is reported.",
+                  ""]
     checked = [c for s in steps for c in s.checks]
     lines += ["## Each stage's surveys against the previous forecast", ""]
     if not checked:
@@ -180,6 +189,8 @@ def update_summary(steps, until) -> dict:
     return {
         "until": None if until is None else (until if isinstance(until, str) else shown_date(until)),
         "steps": [{"fitted_through": s.stage, "surveys": list(s.surveys), "status": s.result.status,
+                   "sequential_minus_joint_std": None if s.sequential is None else
+                   dict(zip(s.result.parameters.names, map(float, s.sequential.difference_std))),
                    "parameters": {n: {"estimate": float(s.result.fit.p[i]), "std": float(s.result.reliability.std[i])}
                                   for i, n in enumerate(s.result.parameters.names)},
                    "checks": [{"stage": c.stage, "survey": c.survey, "instrument": c.instrument, "chi2": c.chi2,
