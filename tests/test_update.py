@@ -138,6 +138,7 @@ def test_update_ends_at_the_joint_fit_and_scores_each_stage_against_the_previous
                      if b.name == c.instrument and b.survey == c.survey)
         C = f.model_covariance + block.covariance
         np.testing.assert_allclose(c.z, (c.measured - f.forecast) / np.sqrt(np.diag(C)), rtol=1e-10)
+        assert np.max(np.abs(c.z)) < 4.0  # the forecast is right (X1: increments since the advance)
         assert c.chi2 == pytest.approx(float((c.measured - f.forecast) @ np.linalg.solve(C, c.measured - f.forecast)))
     # the sequential Bayesian update (the advance posterior as the prior of the lined surveys) is near the
     # joint refit on this non-linear model (measured: at most 0.14 std)
@@ -257,6 +258,14 @@ def test_update_cli_strict_exits_4_when_red_is_likely(tmp_path):
                         "--strict", "--quiet"], capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 4, r.stdout + r.stderr
     assert "red more likely than 5 %" in r.stderr
+    # `geoback run` writes the same table (triggers.csv, report section, summary.json) and --strict exits 4 too
+    r = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "run", str(path), "--out", str(tmp_path / "r"),
+                        "--strict", "--quiet"], capture_output=True, text=True, cwd=tmp_path)
+    assert r.returncode == 4, r.stdout + r.stderr
+    assert "## Trigger levels (TARP)" in (tmp_path / "r" / "report.md").read_text()
+    rows = list(csv.DictReader(open(tmp_path / "r" / "triggers.csv")))
+    crown = next(t for t in rows if t["quantity"] == "crown-settlement")
+    assert crown["status"] == "red" and float(crown["p_red"]) > 0.99
     r = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "update", str(CASE), "--out", str(tmp_path / "p"),
                         "--until", "2026-02-01"], capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 2 and "expected surveys up to 2026-02-01" in r.stderr, r.stderr

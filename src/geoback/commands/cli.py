@@ -358,7 +358,8 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
 
 EXIT_CODES = """Exit codes: 0 converged (warnings, if any, are printed); 1 the fit did not converge or did not
 move from the initial values, or was stopped at the time limit (--time-limit); 2 the input was refused
-(the message names file, line and field); 3 with --strict: converged, but with warnings; 130 interrupted."""
+(the message names file, line and field); 3 with --strict: converged, but with warnings; 4 with --strict: a red
+trigger level is more likely than --red-probability (or already read); 130 interrupted."""
 
 
 @app.command(epilog=EXIT_CODES)
@@ -376,7 +377,10 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
                  "it takes; 'linearised' always linearises"),
         profile: bool = typer.Option(False, "--profile", help="profile-likelihood intervals for every parameter "
                                      "(by default only where the linearised interval is unreliable)"),
-        strict: bool = typer.Option(False, "--strict", help="exit 3 if the result carries any warning (for CI)"),
+        strict: bool = typer.Option(False, "--strict", help="exit 3 if the result carries any warning, 4 if a red "
+                                                            "trigger level is likely (for CI)"),
+        red_probability: float = typer.Option(0.05, "--red-probability", min=0.0, max=1.0,
+                                              help="with --strict: the largest acceptable probability of red"),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="print only the final line"),
         as_json: bool = _json_option(),
         allow_large: bool = _allow_large(),
@@ -431,6 +435,8 @@ def run(case: Path = typer.Argument(..., help="case file (YAML)"),
                f"factorisation(s){warned}) -> {folder}", err=as_json)
     if res.fit.status != "converged" or not res.fit.moved:
         raise typer.Exit(1)
+    if strict:
+        _red_exit(json.loads((folder / "summary.json").read_text()).get("triggers", []), red_probability)
     if strict and res.caveats:
         raise typer.Exit(3)
 
@@ -475,12 +481,18 @@ def update(case: Path = typer.Argument(..., help="case file (YAML) with dated su
     if any(s.result.fit.status != "converged" for s in steps):
         raise typer.Exit(1)
     if strict:
-        over = [t for t in last.triggers if t.red is not None and
-                ((t.measured and abs(t.value) > t.red) or (not t.measured and t.p_red > red_probability))]
-        if over:
-            typer.echo(f"strict: red more likely than {100 * red_probability:g} % for "
-                       f"{', '.join(sorted({t.quantity for t in over}))}", err=True)
-            raise typer.Exit(4)
+        _red_exit(json.loads((folder / "summary.json").read_text())["triggers"], red_probability)
+
+
+def _red_exit(triggers, red_probability: float) -> None:
+    """--strict: exit 4 when a red level is read already or more likely than `red_probability`."""
+    over = [t["quantity"] for t in triggers if t["red"] is not None and
+            ((t["std"] == 0 and t["when"].startswith("now") and abs(t["value"]) > t["red"])
+             or (not t["when"].startswith("now") and t["p_red"] > red_probability))]
+    if over:
+        typer.echo(f"strict: red more likely than {100 * red_probability:g} % (or read already) for "
+                   f"{', '.join(sorted(set(over)))}", err=True)
+        raise typer.Exit(4)
 
 
 def _until(loaded, until: Optional[str]):

@@ -84,9 +84,33 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
             res = replace(res, caveats=tuple(res.caveats) + (Caveat("walls-skipped", f"walls.csv and supports.csv "
                                                                                       f"not written: {exc}"),))
     exploration, res = _trough_and_damage(analysis, res, exploration, say)
+    exploration = _triggers(analysis, res, exploration, say)
     write_run(res, Path(out), exploration, plots=plots, readings=lines)
     return res
 
+
+
+def _triggers(analysis, res, exploration, say):
+    """The trigger levels (TARP: triggers.csv, the report's section) where the case gives any: the latest
+    survey against them, and the probability of exceeding each at the next stage and the end."""
+    from geoback.case.loading import stage_names
+    from geoback.inference.explore import Exploration
+    from geoback.worth.forecast import unusable_estimate
+    from geoback.worth.updating import forecast_surveys, later_blocks, trigger_table
+
+    case = analysis.loaded.case
+    if not any(i.triggers for i in case.instruments) and not any(f.triggers for f in case.forecasts):
+        return exploration
+    if unusable_estimate(res):
+        return exploration
+    stages = stage_names(case)
+    stage = stages[max(stages.index(b.stage) for b in analysis.simulation.survey.blocks)]
+    if say is not None:
+        say(f"trigger levels: the readings through stage '{stage}' and the forecasts of the later stages")
+    triggered = {i.name for i in case.instruments if i.triggers is not None}
+    ahead = forecast_surveys(analysis, res, [b for b in later_blocks(analysis, stage) if b.name in triggered])
+    rows = tuple(trigger_table(analysis, stage, ahead, res.forecasts))
+    return replace(exploration or Exploration(), triggers=rows)
 
 
 def _trough_and_damage(analysis, res, exploration, say):

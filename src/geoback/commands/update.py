@@ -19,10 +19,10 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
     from dataclasses import replace
 
     from geoback.inference.identification import identify, prepare
-    from geoback.observation.instruments import case_blocks
     from geoback.observation.readings import survey_blocks
     from geoback.reports.update_report import write_update
-    from geoback.worth.updating import UpdateStep, forecast_surveys, scored, sequential_step
+    from geoback.worth.updating import (UpdateStep, forecast_surveys, later_blocks, scored, sequential_step,
+                                        trigger_table)
 
     say = say or (lambda text: None)
     stages = stage_names(loaded.case)
@@ -31,8 +31,7 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
     if not blocks:
         raise loaded.error(("instruments",), f"expected surveys up to {_cut_words(until)}, found none")
     read = [s for s in stages if any(b.stage == s for b in blocks)]
-    since = {b.name: b.since for b in blocks}
-    geometry = [replace(g, since=since.get(g.name, g.since)) for g in case_blocks(loaded)]
+    since = {b.name: b.since for b in blocks}  # from every survey up to the cut-off (a baseline says it)
     steps, mesh, previous, previous_blocks = [], None, None, []
     for k, stage in enumerate(read):
         last = k == len(read) - 1
@@ -45,10 +44,7 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
             f"fitting {len(fitted)} surveys of {len({b.name for b in fitted})} instruments")
         res = identify(analysis)
         say(f"  {res.status}: " + ", ".join(f"{n} = {v:.4g}" for n, v in zip(res.parameters.names, res.fit.p)))
-        later = stages[stages.index(stage) + 1:]
-        ahead_blocks = [g.at(s) for s in later for g in geometry
-                        if g.since is None or stages.index(s) > stages.index(g.since)]
-        ahead = forecast_surveys(analysis, res, ahead_blocks)
+        ahead = forecast_surveys(analysis, res, later_blocks(analysis, stage, since))
         checks = ()
         if previous is not None:
             mine = [b for b in fitted if b.stage == stage]
@@ -74,7 +70,7 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
                 forecasts = forecast(analysis, res, draws=draws if last else 0)
         step = UpdateStep(stage, res, tuple(f"{b.name} {b.set_name}" for b in fitted), tuple(ahead), checks,
                           forecasts=forecasts, sequential=sequential)
-        step = replace(step, triggers=tuple(_triggers(loaded, analysis, step, stages)))
+        step = replace(step, triggers=tuple(trigger_table(analysis, stage, ahead, forecasts)))
         steps.append(step)
         previous, previous_blocks = step, fitted
     write_update(steps, loaded, Path(out), until, plots=plots)
@@ -111,49 +107,3 @@ def _per_survey(ahead, blocks):
             rows = b.kept if b.kept is not None else range(len(f.forecast))
             out.append(f.rows(rows, b.labels, b.survey, b.covariance))
     return out
-
-
-def _triggers(loaded, analysis, step, stages):
-    """TARP rows of every instrument and forecast with trigger levels: now (the latest survey), the
-    next stage and the end (the forecasts of the step)."""
-    import numpy as np
-
-    from geoback.case.timeline import forecast_quantity, instrument_quantity, levels
-    from geoback.worth.updating import trigger_rows
-
-    case = loaded.case
-    rows = []
-    k = stages.index(step.stage)
-    ahead_stages = [s for s in (stages[k + 1] if k + 1 < len(stages) else None, stages[-1]) if s is not None]
-    ahead_stages = list(dict.fromkeys(ahead_stages))
-    fitted = analysis.simulation.survey.blocks
-    measured = analysis.misfit.data.measured
-    for ins in case.instruments:
-        if ins.triggers is None:
-            continue
-        q = instrument_quantity(ins)
-        amber, red = levels(ins.triggers, q)
-        unit = "kN" if q == "force" else "m"
-        r0, latest = 0, None
-        for b in fitted:
-            if b.name == ins.name:
-                latest = (b, measured[r0:r0 + b.m])
-            r0 += b.m
-        if latest is not None:
-            b, v = latest
-            rows.append(trigger_rows(ins.name, f"now ({b.survey or b.stage})", b.stage, b.labels, v, np.zeros(len(v)),
-                                     amber, red, unit, measured=True))
-        for s in ahead_stages:
-            f = next((f for f in step.ahead if f.instrument == ins.name and f.stage == s), None)
-            if f is not None:
-                when = "end" if s == stages[-1] else "next stage"
-                rows.append(trigger_rows(ins.name, when, s, f.labels, f.forecast, f.std_model, amber, red, unit))
-    if step.forecasts is not None:
-        for f in case.forecasts:
-            if f.triggers is None:
-                continue
-            q = forecast_quantity(case, f)
-            amber, red = levels(f.triggers, q)
-            fc = step.forecasts[f.name]
-            rows.append(trigger_rows(f.name, "forecast", fc.stage, None, fc.values, fc.std, amber, red, fc.unit))
-    return rows

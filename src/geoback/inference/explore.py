@@ -104,6 +104,7 @@ class Exploration:
     trough: object | None = None  # worth.trough.Troughs: measured and model settlement troughs per stage
     # (tunnels with surface settlement readings or a `trough:` section; set by `geoback run`)
     damage: object | None = None  # worth.damage.Damage: the buildings' greenfield damage (set by `geoback run`)
+    triggers: tuple | None = None  # worth.updating.TriggerRow: the trigger levels (TARP; set by `geoback run`)
 
 
 def other_method(method: str) -> str:

@@ -67,6 +67,10 @@ def summary(res, exploration=None, readings=()) -> dict:
     zone = getattr(exploration, "plastic_zone", None)
     if zone is not None:
         out["plastic_zone"] = zone.as_dict()
+    if getattr(exploration, "triggers", None):
+        from geoback.reports.update_report import triggers_json
+
+        out["triggers"] = triggers_json(exploration.triggers)
     if getattr(exploration, "walls", None) is not None:
         from geoback.reports.walls import as_dict as walls_dict
 
@@ -179,6 +183,10 @@ def report_text(res, exploration=None, readings=(), figures=()) -> str:
         from geoback.reports.forecast_report import report_section
 
         text += report_section(res.forecasts)
+    if getattr(exploration, "triggers", None):
+        from geoback.reports.update_report import trigger_section
+
+        text += trigger_section(exploration.triggers)
     return text
 
 
@@ -369,6 +377,10 @@ def _write_run(res, out: Path, exploration, plots: bool, readings=()) -> None:
         from geoback.reports.forecast_report import HEADER, forecast_rows
 
         write_csv(out / "forecast.csv", HEADER, forecast_rows(res.forecasts))
+    if exploration is not None and getattr(exploration, "triggers", None):
+        from geoback.reports.update_report import TRIGGER_HEADER, trigger_row
+
+        write_csv(out / "triggers.csv", TRIGGER_HEADER[1:], [trigger_row(t)[1:] for t in exploration.triggers])
     figures = []
     if plots:
         from geoback.reports.plots import plot_run

@@ -76,15 +76,40 @@ def _level_scale(unit: str) -> tuple[float, str]:
     return (1e3, "mm") if unit == "m" else (1.0, unit)
 
 
+def trigger_row(t, fitted: str = "") -> list:
+    """One TriggerRow as a row of TRIGGER_HEADER (levels and values in mm or kN)."""
+    f, unit = _level_scale(t.unit)
+    return [fitted, t.quantity, t.when, t.stage, t.where, rounded(f * t.value, 6), rounded(f * t.std, 6),
+            "" if t.amber is None else rounded(f * t.amber, 6), "" if t.red is None else rounded(f * t.red, 6),
+            rounded(t.p_amber, 6), rounded(t.p_red, 6), unit, t.status]
+
+
 def trigger_table_rows(steps) -> list[list]:
-    rows = []
-    for s in steps:
-        for t in s.triggers:
-            f, unit = _level_scale(t.unit)
-            rows.append([s.stage, t.quantity, t.when, t.stage, t.where, rounded(f * t.value), rounded(f * t.std),
-                         "" if t.amber is None else rounded(f * t.amber), "" if t.red is None else rounded(f * t.red),
-                         rounded(t.p_amber), rounded(t.p_red), unit, t.status])
-    return rows
+    return [trigger_row(t, s.stage) for s in steps for t in s.triggers]
+
+
+def triggers_json(triggers) -> list[dict]:
+    return [{"quantity": t.quantity, "when": t.when, "stage": t.stage, "where": t.where, "value": t.value,
+             "std": t.std, "amber": t.amber, "red": t.red, "p_amber": t.p_amber, "p_red": t.p_red,
+             "unit": t.unit, "status": t.status, "first_order_only": t.nonlinear} for t in triggers]
+
+
+TRIGGER_WORDS = ("the probability that the movement exceeds each level at the next stage and at the end (first order, "
+                 "from the band of the model's movement; the reading most likely to exceed red is shown). Status: "
+                 "red when red is more likely than not, amber when amber is more likely than not or red has 5 % "
+                 "or more, else green.")
+
+
+def trigger_section(triggers) -> str:
+    """The TARP section of a run's report.md."""
+    lines = ["", "## Trigger levels (TARP)", "",
+             f"The latest survey against the levels, and {TRIGGER_WORDS} Every row: triggers.csv.", ""]
+    lines += trigger_lines(triggers)
+    odd = [t.quantity for t in triggers if t.nonlinear]
+    if odd:
+        lines += ["", f"The sampled band of {', '.join(odd)} departs from the linear one: its probabilities are first "
+                      f"order only and may be off where the model is non-linear."]
+    return "\n".join(lines) + "\n"
 
 
 def _pct(p: float) -> str:
@@ -161,11 +186,8 @@ def update_text(steps, loaded, until) -> str:
                       f"hold). Every reading: forecast_checks.csv.", ""]
     if last.triggers:
         lines += ["## Trigger levels (TARP)", "",
-                  f"After the fit through stage '{last.stage}': the latest survey against the levels, and the "
-                  f"probability that the movement exceeds each level at the next stage and at the end (first order, "
-                  f"from the band of the model's movement; the reading most likely to exceed red is shown). Status: "
-                  f"red when red is more likely than not, amber when amber is more likely than not or red has 5 % "
-                  f"or more, else green.", ""]
+                  f"After the fit through stage '{last.stage}': the latest survey against the levels, and "
+                  f"{TRIGGER_WORDS}", ""]
         lines += trigger_lines(last.triggers) + ["", "Every step: triggers.csv.", ""]
     later = [a for a in last.ahead]
     if later:
@@ -196,9 +218,7 @@ def update_summary(steps, until) -> dict:
                    "checks": [{"stage": c.stage, "survey": c.survey, "instrument": c.instrument, "chi2": c.chi2,
                                "dof": len(c.z), "p": c.p, "inside_95": c.inside, "max_abs_z": float(np.max(np.abs(c.z))),
                                "text": c.sentence()} for c in s.checks]} for s in steps],
-        "triggers": [{"quantity": t.quantity, "when": t.when, "stage": t.stage, "where": t.where, "value": t.value,
-                      "std": t.std, "amber": t.amber, "red": t.red, "p_amber": t.p_amber, "p_red": t.p_red,
-                      "unit": t.unit, "status": t.status} for t in last.triggers],
+        "triggers": triggers_json(last.triggers),
         "status": max((t.status for t in last.triggers), key=("green", "amber", "red").index, default="green"),
     }
 

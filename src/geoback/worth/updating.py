@@ -230,6 +230,7 @@ class TriggerRow:
     p_red: float
     unit: str
     measured: bool
+    nonlinear: bool = False  # a forecast whose sampled band departs from the linear one: first order only
 
     @property
     def status(self) -> str:
@@ -259,6 +260,70 @@ def trigger_rows(name: str, when: str, stage: str, labels, mean, std, amber, red
     lab = labels[i] if labels else None
     return TriggerRow(name, when, stage, _where(lab) if lab is not None else "", float(mean[i]), float(std[i]),
                       amber, red, pa, pr, unit, measured)
+
+
+def trigger_table(analysis, stage: str, ahead, forecasts) -> list[TriggerRow]:
+    """TARP rows of every instrument and forecast of the case with trigger levels: the latest survey
+    fitted (now), the next stage and the end (from `ahead`, ``SurveyForecast`` of later stages), and the
+    case's forecasts (`forecasts`, ``worth.forecast.Forecasts``; a forecast whose sampled band departs
+    from the linear one is marked: its probabilities are first order only)."""
+    from geoback.case.loading import stage_names
+    from geoback.case.timeline import forecast_quantity, instrument_quantity, levels
+
+    case = analysis.loaded.case
+    stages = stage_names(case)
+    k = stages.index(stage)
+    later = list(dict.fromkeys(s for s in (stages[k + 1] if k + 1 < len(stages) else None, stages[-1])
+                               if s is not None and stages.index(s) > k))
+    rows = []
+    fitted = analysis.simulation.survey.blocks
+    measured = analysis.misfit.data.measured
+    for ins in case.instruments:
+        if ins.triggers is None:
+            continue
+        q = instrument_quantity(ins)
+        amber, red = levels(ins.triggers, q)
+        unit = "kN" if q == "force" else "m"
+        r0, latest = 0, None
+        for b in fitted:
+            if b.name == ins.name:
+                latest = (b, measured[r0:r0 + b.m])
+            r0 += b.m
+        if latest is not None:
+            b, v = latest
+            rows.append(trigger_rows(ins.name, f"now ({b.survey or b.stage})", b.stage, b.labels, v, np.zeros(len(v)),
+                                     amber, red, unit, measured=True))
+        for s in later:
+            f = next((f for f in ahead if f.instrument == ins.name and f.stage == s), None)
+            if f is not None:
+                rows.append(trigger_rows(ins.name, "end" if s == stages[-1] else "next stage", s, f.labels,
+                                         f.forecast, f.std_model, amber, red, unit))
+    if forecasts is not None:
+        for f in case.forecasts:
+            if f.triggers is None:
+                continue
+            amber, red = levels(f.triggers, forecast_quantity(case, f))
+            fc = forecasts[f.name]
+            row = trigger_rows(f.name, "forecast", fc.stage, None, fc.values, fc.std, amber, red, fc.unit)
+            rows.append(replace(row, nonlinear=bool(fc.nonlinear)))
+    return rows
+
+
+def later_blocks(analysis, stage: str, since: dict | None = None) -> list:
+    """Every instrument of the case at every stage after `stage` (increments since its installation:
+    `since` {instrument: stage}, default as the fit reads them), for the forecasts of what it will read."""
+    from geoback.case.loading import stage_names
+    from geoback.observation.instruments import case_blocks
+
+    stages = stage_names(analysis.loaded.case)
+    since = since if since is not None else {b.name: b.since for b in analysis.simulation.survey.blocks}
+    out = []
+    for s in stages[stages.index(stage) + 1:]:
+        for g in case_blocks(analysis.loaded):
+            g = replace(g, since=since.get(g.name, g.since))
+            if g.since is None or stages.index(s) > stages.index(g.since):
+                out.append(g.at(s))
+    return out
 
 
 @dataclass(frozen=True)
