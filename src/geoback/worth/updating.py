@@ -170,29 +170,35 @@ def sequential_step(analysis, blocks, measured: np.ndarray, p_prev: np.ndarray, 
     """This step's new surveys (`blocks`, their readings `measured`) with the previous posterior as the
     prior (``Sequential``); starts from the previous estimate. For a model linear in the parameters it
     is the joint refit exactly (Gaussian conjugacy); otherwise they differ by the curvature the
-    linearisation of the previous step leaves out."""
+    linearisation of the previous step leaves out. The readings are whitened by the seam
+    (``misfit.whiten_block``) and every inverse is eqn 55's (``LinearAnalysis``)."""
+    from geoback.inference.linear_analysis import LinearAnalysis
+    from geoback.inference.misfit import whiten_block
+
     names = analysis.parameters.names
-    Cx = np.zeros((len(measured), len(measured)))
-    r0 = 0
-    for b in blocks:
-        Cx[r0:r0 + b.m, r0:r0 + b.m] = b.covariance
-        r0 += b.m
-    W = np.linalg.inv(Cx)
-    P0 = np.linalg.inv(C_prev)
+    P0 = LinearAnalysis.from_information(C_prev).covariance  # C_prev^-1: the prior's information
+
+    def whitened(pred):
+        r, A, r0 = [], [], 0
+        for b in blocks:
+            rows = slice(r0, r0 + b.m)
+            r.append(whiten_block(b, measured[rows] - pred.x[rows]))
+            A.append(whiten_block(b, pred.A[rows]))
+            r0 += b.m
+        return np.concatenate(r), np.vstack(A)
+
     p = np.array(p_prev, float)
     with analysis.simulation.surveying(list(blocks)) as view:
         for k in range(1, iterations + 1):
-            pred = view.predict(analysis.values_at(p), names, sensitivities=True)
-            A = pred.A
-            H = A.T @ W @ A + P0
-            g = A.T @ W @ (measured - pred.x) - P0 @ (p - p_prev)
-            step = np.linalg.solve(H, g)
+            r, A = whitened(view.predict(analysis.values_at(p), names, sensitivities=True))
+            post = LinearAnalysis.from_information(A.T @ A + P0)
+            step = post.covariance @ (A.T @ r - P0 @ (p - p_prev))
             p = p + step
             if np.all(np.abs(step) <= tol * np.maximum(np.abs(p), 1e-12)):
                 break
-        pred = view.predict(analysis.values_at(p), names, sensitivities=True)
-        H = pred.A.T @ W @ pred.A + P0
-    return Sequential(p, np.linalg.inv(H), k, (p - np.asarray(p_joint)) / np.asarray(std_joint))
+        _, A = whitened(view.predict(analysis.values_at(p), names, sensitivities=True))
+    C = LinearAnalysis.from_information(A.T @ A + P0).covariance
+    return Sequential(p, np.array(C), k, (p - np.asarray(p_joint)) / np.asarray(std_joint))
 
 
 # ------------------------------------------------------------------------------------ triggers
