@@ -183,6 +183,8 @@ def test_trigger_probabilities_and_status_until_a_stage(tmp_path):
     last = steps[-1]
     rows = {(t.quantity, t.when): t for t in last.triggers}
     assert ("I1", "end") in rows and ("S1", "end") in rows and ("X1", "end") in rows
+    crown = rows[("crown-settlement", "forecast")]  # sampled through the model at the last step
+    assert np.isfinite(crown.p_amber_sampled) and abs(crown.p_amber_sampled - crown.p_amber) < 0.1
     t = rows[("S1", "end")]
     p = stats.norm.sf((t.red - t.value) / t.std) + stats.norm.cdf((-t.red - t.value) / t.std)
     assert t.p_red == pytest.approx(p, rel=1e-9) and 0.0 <= t.p_red <= t.p_amber <= 1.0
@@ -266,6 +268,7 @@ def test_update_cli_strict_exits_4_when_red_is_likely(tmp_path):
     rows = list(csv.DictReader(open(tmp_path / "r" / "triggers.csv")))
     crown = next(t for t in rows if t["quantity"] == "crown-settlement")
     assert crown["status"] == "red" and float(crown["p_red"]) > 0.99
+    assert float(crown["p_red_sampled"]) > 0.99  # the sampling check's draws through the model agree
     r = subprocess.run([sys.executable, "-m", "geoback.commands.cli", "update", str(CASE), "--out", str(tmp_path / "p"),
                         "--until", "2026-02-01"], capture_output=True, text=True, cwd=tmp_path)
     assert r.returncode == 2 and "expected surveys up to 2026-02-01" in r.stderr, r.stderr

@@ -484,11 +484,16 @@ def update(case: Path = typer.Argument(..., help="case file (YAML) with dated su
         _red_exit(json.loads((folder / "summary.json").read_text())["triggers"], red_probability)
 
 
+def _p_red(t: dict) -> float:
+    """A trigger row's probability of red: sampled through the model where the model is non-linear there."""
+    return t["p_red_sampled"] if t.get("nonlinear") and t.get("p_red_sampled") is not None else t["p_red"]
+
+
 def _red_exit(triggers, red_probability: float) -> None:
     """--strict: exit 4 when a red level is read already or more likely than `red_probability`."""
     over = [t["quantity"] for t in triggers if t["red"] is not None and
             ((t["std"] == 0 and t["when"].startswith("now") and abs(t["value"]) > t["red"])
-             or (not t["when"].startswith("now") and t["p_red"] > red_probability))]
+             or (not t["when"].startswith("now") and _p_red(t) > red_probability))]
     if over:
         typer.echo(f"strict: red more likely than {100 * red_probability:g} % (or read already) for "
                    f"{', '.join(sorted(set(over)))}", err=True)

@@ -14,8 +14,9 @@ from pathlib import Path
 from geoback.case.loading import LoadedCase, stage_names
 
 
-def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool = False, draws: int = 0):
-    """Run the update (module docstring) and write its files to `out`; the steps (``UpdateStep``)."""
+def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool = False, draws: int | None = None):
+    """Run the update (module docstring) and write its files to `out`; the steps (``UpdateStep``). The
+    last step's forecasts run the sampling check (`draws`, default the forecast's) for their triggers."""
     from dataclasses import replace
 
     from geoback.inference.identification import identify, prepare

@@ -21,7 +21,7 @@ CHECK_HEADER = ["forecast_by", "stage", "survey", "instrument", "station", "comp
 AHEAD_HEADER = ["forecast_by", "stage", "instrument", "station", "component", "x [m]", "y [m]", "forecast",
                 "std_model", "band95_low", "band95_high", "unit"]
 TRIGGER_HEADER = ["fitted_through", "quantity", "when", "stage", "where", "value", "std", "amber", "red",
-                  "p_amber", "p_red", "unit", "status"]
+                  "p_amber", "p_red", "p_amber_sampled", "p_red_sampled", "unit", "status"]
 
 
 def _scale(kind: str) -> tuple[float, str]:
@@ -81,7 +81,9 @@ def trigger_row(t, fitted: str = "") -> list:
     f, unit = _level_scale(t.unit)
     return [fitted, t.quantity, t.when, t.stage, t.where, rounded(f * t.value, 6), rounded(f * t.std, 6),
             "" if t.amber is None else rounded(f * t.amber, 6), "" if t.red is None else rounded(f * t.red, 6),
-            rounded(t.p_amber, 6), rounded(t.p_red, 6), unit, t.status]
+            rounded(t.p_amber, 6), rounded(t.p_red, 6), "" if t.p_amber_sampled != t.p_amber_sampled else
+            rounded(t.p_amber_sampled, 6), "" if t.p_red_sampled != t.p_red_sampled else rounded(t.p_red_sampled, 6),
+            unit, t.status]
 
 
 def trigger_table_rows(steps) -> list[list]:
@@ -91,11 +93,15 @@ def trigger_table_rows(steps) -> list[list]:
 def triggers_json(triggers) -> list[dict]:
     return [{"quantity": t.quantity, "when": t.when, "stage": t.stage, "where": t.where, "value": t.value,
              "std": t.std, "amber": t.amber, "red": t.red, "p_amber": t.p_amber, "p_red": t.p_red,
-             "unit": t.unit, "status": t.status, "first_order_only": t.nonlinear} for t in triggers]
+             "p_amber_sampled": None if t.p_amber_sampled != t.p_amber_sampled else t.p_amber_sampled,
+             "p_red_sampled": None if t.p_red_sampled != t.p_red_sampled else t.p_red_sampled,
+             "unit": t.unit, "status": t.status, "nonlinear": t.nonlinear} for t in triggers]
 
 
 TRIGGER_WORDS = ("the probability that the movement exceeds each level at the next stage and at the end (first order, "
-                 "from the band of the model's movement; the reading most likely to exceed red is shown). Status: "
+                 "from the band of the model's movement, and for a forecast also from the sampling check's draws "
+                 "through the model; the reading most likely to exceed red is shown). Status (from the sampled "
+                 "probabilities where the sampled band departs from the linear one): "
                  "red when red is more likely than not, amber when amber is more likely than not or red has 5 % "
                  "or more, else green.")
 
@@ -107,8 +113,8 @@ def trigger_section(triggers) -> str:
     lines += trigger_lines(triggers)
     odd = [t.quantity for t in triggers if t.nonlinear]
     if odd:
-        lines += ["", f"The sampled band of {', '.join(odd)} departs from the linear one: its probabilities are first "
-                      f"order only and may be off where the model is non-linear."]
+        lines += ["", f"The sampled band of {', '.join(odd)} departs from the linear one (the model is non-linear "
+                      f"there): its status is read from the probabilities sampled through the model."]
     return "\n".join(lines) + "\n"
 
 
@@ -122,6 +128,10 @@ def _pct(p: float) -> str:
     return f"{100 * p:.1f} %"
 
 
+def _sampled(p: float) -> str:
+    return "" if p != p else f" (sampled {_pct(p)})"
+
+
 def trigger_lines(triggers) -> list[str]:
     """The TARP status table of one step, in Markdown."""
     if not triggers:
@@ -132,8 +142,8 @@ def trigger_lines(triggers) -> list[str]:
         f, unit = _level_scale(t.unit)
         value = f"{number(f * t.value, 3)} {unit}" + ("" if t.measured else f" ± {number(Z95 * f * t.std, 2)}")
         lv = (lambda v: "-" if v is None else f"{number(f * v, 3)} {unit}")
-        pa = "-" if t.measured else _pct(t.p_amber)
-        pr = "-" if t.measured else _pct(t.p_red)
+        pa = "-" if t.measured else _pct(t.p_amber) + _sampled(t.p_amber_sampled)
+        pr = "-" if t.measured else _pct(t.p_red) + _sampled(t.p_red_sampled)
         out.append(f"| {t.quantity} | {t.when} | {t.stage} | {t.where} | {value} | {lv(t.amber)} | {lv(t.red)} | "
                    f"{pa} | {pr} | **{t.status}** |")
     return out

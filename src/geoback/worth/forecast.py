@@ -126,6 +126,7 @@ class Forecasts:
     sampled_low: np.ndarray | None = None
     sampled_high: np.ndarray | None = None
     sampled_exceed: np.ndarray | None = None
+    samples: np.ndarray | None = None  # the sampling check's forecasts (draws, rows): trigger probabilities
     draws: int = 0
     rejected: int = 0
     nonlinear: list[str] = field(default_factory=list)  # forecasts whose sampled band differs from the linear one
@@ -537,5 +538,5 @@ def _sampled(out: Forecasts, model: ForecastModel, analysis, result, n: int, bud
     off = np.maximum(np.abs(lo - out.low), np.abs(hi - out.high))
     bad = off > np.maximum(0.1 * width, 3 * se) + 1e-12 * np.abs(out.value).max(initial=0)
     nonlinear = [nm for nm in out.names if np.any(bad[out.rows(nm)])]
-    return replace(out, sampled_low=lo, sampled_high=hi, sampled_exceed=exceed, draws=len(S), rejected=rejected,
-                   nonlinear=nonlinear)
+    return replace(out, sampled_low=lo, sampled_high=hi, sampled_exceed=exceed, samples=S, draws=len(S),
+                   rejected=rejected, nonlinear=nonlinear)

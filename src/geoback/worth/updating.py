@@ -236,15 +236,26 @@ class TriggerRow:
     p_red: float
     unit: str
     measured: bool
-    nonlinear: bool = False  # a forecast whose sampled band departs from the linear one: first order only
+    nonlinear: bool = False  # a forecast whose sampled band departs from the linear one
+    p_amber_sampled: float = math.nan  # from the sampling check's draws through the model (NaN: none)
+    p_red_sampled: float = math.nan
+
+    @property
+    def probabilities(self) -> tuple[float, float]:
+        """(P amber, P red) the status is read from: the sampled ones where the model is non-linear
+        (the sampled band departs from the linear one), else the first-order ones."""
+        if self.nonlinear and np.isfinite(self.p_red_sampled):
+            return self.p_amber_sampled, self.p_red_sampled
+        return self.p_amber, self.p_red
 
     @property
     def status(self) -> str:
         if self.measured:
             return status_of(self.value, self.amber, self.red)
-        if self.red is not None and self.p_red >= 0.5:
+        pa, pr = self.probabilities
+        if self.red is not None and pr >= 0.5:
             return "red"
-        if (self.amber is not None and self.p_amber >= 0.5) or (self.red is not None and self.p_red >= 0.05):
+        if (self.amber is not None and pa >= 0.5) or (self.red is not None and pr >= 0.05):
             return "amber"
         return "green"
 
@@ -310,8 +321,14 @@ def trigger_table(analysis, stage: str, ahead, forecasts) -> list[TriggerRow]:
                 continue
             amber, red = levels(f.triggers, forecast_quantity(case, f))
             fc = forecasts[f.name]
-            row = trigger_rows(f.name, "forecast", fc.stage, None, fc.values, fc.std, amber, red, fc.unit)
-            rows.append(replace(row, nonlinear=bool(fc.nonlinear)))
+            row = replace(trigger_rows(f.name, "forecast", fc.stage, None, fc.values, fc.std, amber, red, fc.unit),
+                          nonlinear=bool(fc.nonlinear))
+            if forecasts.samples is not None:  # the same point's draws through the model
+                i = int(np.argmin(np.abs(fc.values - row.value) + np.abs(fc.std - row.std)))
+                S = np.abs(forecasts.samples[:, forecasts.rows(f.name)[i]])
+                row = replace(row, p_amber_sampled=float(np.mean(S > amber)) if amber is not None else math.nan,
+                              p_red_sampled=float(np.mean(S > red)) if red is not None else math.nan)
+            rows.append(row)
     return rows
 
 
