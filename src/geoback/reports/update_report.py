@@ -247,12 +247,12 @@ def write_update(steps, loaded, out: Path, until, plots: bool = False) -> None:
             figs = {"history": history_figure(steps, loaded.case.name),
                     "forecast_checks": checks_figure(steps, loaded.case.name)}
             save_figures({k: v for k, v in figs.items() if v is not None}, staging)
-            text += "\n## Figures\n\n" + "\n".join(f"![{k.replace('_', ' ')}]({k}.png)" for k, v in figs.items()
-                                                   if v is not None) + "\n"
+            text += "\n## Figures\n\n" + "\n\n".join(f"![{k.replace('_', ' ')}]({k}.png)" for k, v in figs.items()
+                                                     if v is not None) + "\n"
         write_atomic(staging / "report.md", text)
         from geoback.reports.html import write_html
 
-        write_html(staging / "report.html", text, staging, steps[-1].result, name=loaded.case.name,
+        write_html(staging / "report.html", text, staging, None, name=loaded.case.name,  # warnings: their section
                    kind="update as construction proceeds",
                    how_to_read="Read the parameters stage by stage first, then how each stage's surveys scored "
                                "against the forecast made before they were read (inside the 95 % band about 95 % "
