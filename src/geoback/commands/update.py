@@ -60,7 +60,7 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
             prev = previous.result
             sequential = sequential_step(analysis, new, _measured_of(analysis, new), prev.fit.p,
                                          prev.reliability.covariance, res.fit.p, res.reliability.std)
-            say(f"  sequential Bayesian update (the previous posterior as prior): "
+            say("  sequential Bayesian update (the previous posterior as prior): "
                 + ", ".join(f"{n} {d:+.2g} σ" for n, d in zip(res.parameters.names, sequential.difference_std))
                 + " from the joint refit")
         forecasts = None
