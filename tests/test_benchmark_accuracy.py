@@ -54,6 +54,7 @@ def test_a_staged_null_case_runs_through_the_benchmark(bench, tmp_path):
     assert row["effect_size"] < 1.0 and row["raw_movement"] == 0.0
 
 
+@pytest.mark.slow  # 29 s; yielding is named and refitted in test_diagnose_yielding (default tier)
 def test_yielding_refit_does_not_stall_in_the_elastic_region(bench, tmp_path):
     """bench-047 of `--staged 45 --yielding 10` (seed 2024): from the small plastic zone alone the
     refit walked c' up into the elastic region (zero gradient: 'c = 99 ± inf, not determined') and

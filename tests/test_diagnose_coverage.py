@@ -20,6 +20,7 @@ def _cache(tmp_path, monkeypatch):
     monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
 
 
+@pytest.mark.slow  # 46 s: the study in small; the diagnosis itself is tested in the default tier
 def test_coverage_study_small(tmp_path):
     import diagnose_coverage as study
 

@@ -36,7 +36,8 @@ def svg_title(path) -> str:
     return " ".join(titles)
 
 
-@pytest.fixture(scope="module", params=[NATM, TWIN], ids=["natm-heading-bench", "twin-tunnels"])
+@pytest.fixture(scope="module", params=[NATM, pytest.param(TWIN, marks=pytest.mark.slow)],
+                ids=["natm-heading-bench", "twin-tunnels"])  # twin tunnels: 37 s, in the slow tier
 def ran(request, tmp_path_factory):
     case = request.param
     out = tmp_path_factory.mktemp(case.stem)
@@ -91,6 +92,7 @@ def test_field_vtu_holds_every_stage(ran):
     assert np.isnan(stress[last == -1]).all() and np.isfinite(stress[last >= 0]).all()
 
 
+@pytest.mark.slow  # 25 s: simulate, covariance, diagnose and design on openings (run stays in the default tier)
 def test_simulate_covariance_diagnose_and_design(tmp_path):
     for case in (NATM, TWIN):
         sim = cli("simulate", case, "--out", tmp_path / f"sim-{case.stem}", "--plots")

@@ -337,6 +337,7 @@ def _kill_trials(previous_result, moments: list[float], sig=signal.SIGKILL) -> d
     return outcomes
 
 
+@pytest.mark.slow  # 35 s; the set's replacement and the removal of killed writers' leftovers: default tier
 def test_kill_9_during_run_leaves_a_consistent_set(previous_result):
     """Default suite: three kills, early (computing), late (writing) and at about the end."""
     outcomes = _kill_trials(previous_result, [0.3, 0.8, 0.97])

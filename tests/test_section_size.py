@@ -64,8 +64,17 @@ def test_estimate_within_stated_factor(label, data):
 
 
 def test_a_huge_section_is_refused_before_gmsh():
+    _refused_before_gmsh((1e-5,))  # walls of millions of elements: refused at once
+
+
+@pytest.mark.slow  # 30 s: the size estimate integrates a section just beyond the limit
+def test_a_section_just_beyond_the_limit_is_refused_before_gmsh():
+    _refused_before_gmsh((0.004,))
+
+
+def _refused_before_gmsh(sizes):
     calls = section_mesh.GMSH_CALLS
-    for size in (0.004, 1e-5):  # beyond the limit; walls of millions of elements
+    for size in sizes:
         with pytest.raises(CaseError) as err:
             case_from_data(_without_readings(NATM, size_tunnel=size), {}, file="natm.yaml")
         assert err.value.field == "mesh.size_tunnel"
