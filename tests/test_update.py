@@ -292,6 +292,10 @@ def test_surveys_of_a_stage_averaged_with_their_covariance_divided(tmp_path):
     two = [b for b in survey_blocks(separate, stages)[0] if b.name == "I1"]
     assert len(one) == 2 and len(two) == 4
     np.testing.assert_allclose(one[0].covariance, two[0].covariance / 2)
+    from geoback.observation.readings import measured_values  # each averaged block finds its readings again
+
+    np.testing.assert_allclose(measured_values(loaded, one), np.concatenate([avg.values["I1"]["advance"],
+                                                                            avg.values["I1"]["lined"]]))
 
 
 @pytest.mark.quick

@@ -91,10 +91,13 @@ class InstrumentBlock:
     support: str | None = None  # a load cell: the prop or anchor whose force it reads
     survey: str | None = None  # the survey (date or name) of a dated readings file; None: one set a stage
     since: str | None = None  # installed after this stage: reads P (u_stage - u_since) (None: since the start)
+    reading_set: str | None = None  # the key of its readings when not derived (an average of surveys)
 
     @property
     def set_name(self) -> str:
         """The key of this block's readings (``readings.CaseReadings``): the stage, or 'stage@survey'."""
+        if self.reading_set is not None:
+            return self.reading_set
         return self.stage if self.survey is None else f"{self.stage}@{self.survey}"
 
     @property
@@ -144,12 +147,13 @@ class InstrumentBlock:
         """Linewise: what each reading measures, in words ('horizontal displacement', ...)."""
         return LINEWISE_KINDS[self.kind].measures
 
-    def at(self, stage: str, survey: str | None = None, since: str | None = None, averaged: int = 1
-           ) -> "InstrumentBlock":
+    def at(self, stage: str, survey: str | None = None, since: str | None = None, averaged: int = 1,
+           reading_set: str | None = None) -> "InstrumentBlock":
         """The same instrument read at construction stage `stage` (in the survey `survey`), installed
         after stage `since` (its readings increments since then), as the average of `averaged`
         surveys (C_x / averaged: independent surveys)."""
         out = replace(self, stage=stage, survey=survey, since=since if since is not None else self.since,
+                      reading_set=reading_set,
                       labels=[replace(lab, stage=stage, survey=survey) for lab in self.labels])
         if averaged > 1:
             out = replace(out, covariance=self.covariance / averaged,

@@ -888,7 +888,7 @@ def survey_blocks(loaded: LoadedCase, stages: list[str], read: bool = True
             continue
         for name, v in sets.items():
             m = info.sets.get(name, SetInfo(name, name))
-            block = g.at(m.stage, survey=m.survey, since=info.since, averaged=m.count)
+            block = g.at(m.stage, survey=m.survey, since=info.since, averaged=m.count, reading_set=m.name)
             gone = np.flatnonzero(np.isnan(v))
             blocks.append(block.without(gone) if len(gone) else block)
             values.append(v[~np.isnan(v)])
