@@ -105,3 +105,16 @@ def test_propped_excavation(monkeypatch, capsys):
 def test_every_example_is_tested():
     tested = {name.removeprefix("test_") for name in globals() if name.startswith("test_")}
     assert {p.stem for p in EXAMPLES} <= tested
+
+
+def test_update_on_site(monkeypatch, capsys, tmp_path):
+    """The dated tunnel updated stage by stage: the last step is the joint fit (to 1e-6 relative), every
+    truth inside its final interval, the sequential check within 0.25 std, the lined surveys scored."""
+    ex, out = run_example("update_on_site", monkeypatch, capsys, tmp_path / "u")
+    steps, joint = ex["steps"], ex["joint"]
+    assert [s.stage for s in steps] == ["advance", "lined"]
+    assert abs(steps[-1].result.fit.p - joint.fit.p).max() <= 1e-6 * abs(joint.fit.p).max()
+    assert ex["inside"] == list(ex["TRUTH"])
+    assert abs(steps[-1].sequential.difference_std).max() < 0.25
+    assert len(steps[-1].checks) == 6 and "forecast" in out
+    assert (tmp_path / "u" / "report.html").is_file()
