@@ -317,3 +317,21 @@ def test_inline_readings_of_an_instrument_installed_after_a_stage(tmp_path):
     (tmp_path / "c.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
     err = _refused(tmp_path / "c.yaml")
     assert "instruments[1].readings" in err and "before it was installed (after stage 'lined')" in err
+
+
+@pytest.mark.quick
+def test_a_forward_run_reads_an_instrument_installed_later_as_it_reads(tmp_path):
+    """`geoback simulate` (every instrument at every stage, no readings fitted): X1, zeroed during the
+    advance, is predicted at the lined stage only, as the increment since the advance."""
+    from geoback.commands.simulate import simulate
+
+    loaded = load_case(CASE)
+    analysis = prepare(loaded, with_readings=False)
+    x1 = [b for b in analysis.simulation.survey.blocks if b.name == "X1"]
+    assert [(b.stage, b.since) for b in x1] == [("lined", "advance")]
+    values = analysis.values
+    total = analysis.simulation.surveying([replace(x1[0], since=None)]).predict(values).x
+    before = analysis.simulation.surveying([replace(x1[0].at("advance"), since=None)]).predict(values).x
+    simulate(analysis, tmp_path / "sim", vtu=False)
+    rows = [r for r in csv.DictReader(open(tmp_path / "sim" / "predicted.csv")) if r["instrument"] == "X1"]
+    np.testing.assert_allclose([float(r["computed"]) for r in rows], total - before, rtol=1e-9)

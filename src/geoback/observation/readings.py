@@ -873,8 +873,10 @@ def survey_blocks(loaded: LoadedCase, stages: list[str], read: bool = True
     from geoback.observation.instruments import case_blocks
 
     geometry = case_blocks(loaded)
-    if not read:
-        return [g.at(stage) for g in geometry for stage in stages], None
+    if not read:  # every instrument at every stage it reads (after its installation: increments since then)
+        since = _installations(loaded, geometry, stages)
+        return [g.at(stage, since=since[g.name]) for g in geometry for stage in stages
+                if since[g.name] is None or stages.index(stage) > stages.index(since[g.name])], None
     report = read_readings(loaded, geometry, stages)
     blocks, values, complete = [], [], True
     for g in geometry:
@@ -893,6 +895,18 @@ def survey_blocks(loaded: LoadedCase, stages: list[str], read: bool = True
             blocks.append(block.without(gone) if len(gone) else block)
             values.append(v[~np.isnan(v)])
     return blocks, ((np.concatenate(values) if values else np.zeros(0)) if complete else None)
+
+
+def _installations(loaded: LoadedCase, geometry: list[InstrumentBlock], stages: list[str]) -> dict:
+    """The stage after which each instrument was installed: its dated baseline's stage where its readings
+    say it (readable readings), else the case's installed_after (None: from the start)."""
+    since = {g.name: g.since for g in geometry}
+    try:
+        report = read_readings(loaded, geometry, stages)
+    except CaseError:  # readings that cannot be read are refused where they are used, not here
+        return since
+    since.update({name: sets.since for name, sets in report.sets.items() if sets.since is not None})
+    return since
 
 
 def measured_values(loaded: LoadedCase, blocks: list[InstrumentBlock]) -> np.ndarray | None:
