@@ -335,3 +335,18 @@ def test_a_forward_run_reads_an_instrument_installed_later_as_it_reads(tmp_path)
     simulate(analysis, tmp_path / "sim", vtu=False)
     rows = [r for r in csv.DictReader(open(tmp_path / "sim" / "predicted.csv")) if r["instrument"] == "X1"]
     np.testing.assert_allclose([float(r["computed"]) for r in rows], total - before, rtol=1e-9)
+
+
+@pytest.mark.quick
+def test_the_figures_model_line_of_an_instrument_installed_later_is_its_increment():
+    """The model along X1 in the instruments figure (``explore.profiles``) is what X1 reads: the
+    increment since the advance, at its stations the computed readings (not the total movement)."""
+    from geoback.inference.explore import profiles
+
+    analysis = prepare(load_case(CASE))
+    sim, values = analysis.simulation, analysis.values
+    x1 = next(b for b in sim.survey.blocks if b.name == "X1")
+    prof = profiles(sim, values)["X1"]
+    computed = sim.surveying([x1]).predict(values).x
+    at_stations = np.interp(np.cumsum(x1.lengths), prof.along, prof.line_reading)
+    assert np.max(np.abs(at_stations - computed)) < 0.02 * np.max(np.abs(computed))

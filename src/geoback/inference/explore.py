@@ -263,10 +263,13 @@ def profiles(sim, values: dict) -> dict[str, Profile]:
             along = np.linspace(0.0, s[-1], LINE_POINTS)
             line = start[None] + along[:, None] * d[None]
 
-            def at(stage):
+            def at(stage, since=block.since):
                 u = sim.stage_displacements_at(values, np.vstack([line, start]), stage)
                 ref, u = u[-1], u[:-1]
-                return u, ((u - ref) @ direction if block.relative else u @ direction)
+                reading = (u - ref) @ direction if block.relative else u @ direction
+                if since is not None:  # installed after a stage: it reads the increment since then
+                    reading = reading - at(since, None)[1]
+                return u, reading
 
             try:
                 disp, reading = at(final)
@@ -277,7 +280,9 @@ def profiles(sim, values: dict) -> dict[str, Profile]:
         by_stage_line = {}
         if block.kind == "points" and (line := _row(block.points)) is not None:  # the trough between the points
             try:
-                by_stage_line = {stage: sim.stage_displacements_at(values, line, stage)
+                zero = (sim.stage_displacements_at(values, line, block.since) if block.since is not None
+                        else 0.0)  # installed after a stage: the increment since then
+                by_stage_line = {stage: sim.stage_displacements_at(values, line, stage) - zero
                                  for stage in read_at[block.name]}
                 disp = sim.stage_displacements_at(values, line, final)
             except ValueError:

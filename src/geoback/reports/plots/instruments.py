@@ -302,10 +302,13 @@ def _draw(fig, data: _Readings, profiles: dict, before, boundaries, legend: list
         if depth_axis and boundaries:
             _boundaries(ax, boundaries)
         n_read = sum(len(rows) for _, rows in group)
-        title = f"{block.name} ({block.kind.replace('_', ' ')}, {n_read} readings" + (f" at {len(group)} stages)" if len(group) > 1
-                                                                     else ")")
+        surveyed = any(blk.survey for blk, _ in group)  # dated surveys: one set a survey, named by its date
+        sets = "surveys" if surveyed else "stages"
+        title = f"{block.name} ({block.kind.replace('_', ' ')}, {n_read} readings" + (
+            f" at {len(group)} {sets})" if len(group) > 1 else ")")
         if data.residual is not None:  # the misfit of each set in the title: never over the readings
-            sums = [(blk.stage, data.residual[rows]) for blk, rows in group]
+            sums = [(f"{blk.stage} {blk.survey}" if blk.survey else blk.stage, data.residual[rows])
+                    for blk, rows in group]
             title += "\n" + "\n".join((f"{stg}: " if len(sums) > 1 else "") +
                                       f"Σ r′² = {plain(float(r @ r))}, max |r′| = {plain(float(np.max(np.abs(r))))}"
                                       for stg, r in sums)
