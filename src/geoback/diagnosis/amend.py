@@ -135,6 +135,11 @@ def amended_case(d, folder: Path) -> tuple[dict, str]:
             if "reading_type" in ins:
                 ins["reading_type"] = "displacement"
             ins["readings"] = inline[ins["name"]]
+            since = next((b.since for b in d.final.data.blocks if b.name == ins["name"]), None)
+            for key in ("baseline", "columns", "ignore_columns", "surveys"):  # what the file said: done
+                ins.pop(key, None)
+            if since is not None:  # the readings are increments since the installation
+                ins["installed_after"] = since
         elif ins.get("readings_file"):
             ins["readings_file"] = _relocated(ins["readings_file"], source, Path(folder))
     output = data.get("output")
@@ -180,6 +185,12 @@ def _readings_given_in_memory(d) -> dict:
     for block, rows in data.block_rows():
         values = [float(v) for v in data.measured[rows]]
         if staged:
+            if block.stage in out.get(block.name, {}):
+                from geoback.errors import GeobackError
+
+                raise GeobackError(f"amended.yaml cannot hold the readings of '{block.name}' given in memory: it has "
+                                   f"several surveys at stage '{block.stage}', and inline readings hold one a stage "
+                                   f"(give them in a readings file with a date column)")
             out.setdefault(block.name, {})[block.stage] = values
         else:
             out[block.name] = values
