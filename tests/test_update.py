@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import yaml
 
-from geoback.case.dates import parse_date, stage_on, stage_periods
+from geoback.case.dates import parse_date, stage_on
 from geoback.case.loading import load_case, stage_names
 from geoback.inference.identification import identify, prepare
 from geoback.observation.readings import read_readings, survey_blocks

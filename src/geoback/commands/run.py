@@ -108,7 +108,7 @@ def _triggers(analysis, res, exploration, say):
     if say is not None:
         say(f"trigger levels: the readings through stage '{stage}' and the forecasts of the later stages")
     triggered = {i.name for i in case.instruments if i.triggers is not None}
-    ahead = forecast_surveys(analysis, res, [b for b in later_blocks(analysis, stage) if b.name in triggered])
+    ahead = forecast_surveys(analysis, res, [b for b in later_blocks(analysis, stage) if b.name in triggered], stage)
     rows = tuple(trigger_table(analysis, stage, ahead, res.forecasts))
     return replace(exploration or Exploration(), triggers=rows)
 

@@ -28,7 +28,7 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
     say = say or (lambda text: None)
     stages = stage_names(loaded.case)
     cut = loaded.up_to(until if until is not None else stages[-1])
-    blocks, measured = survey_blocks(cut, stages)
+    blocks, _ = survey_blocks(cut, stages)
     if not blocks:
         raise loaded.error(("instruments",), f"expected surveys up to {_cut_words(until)}, found none")
     read = [s for s in stages if any(b.stage == s for b in blocks)]
@@ -45,7 +45,7 @@ def update_case(loaded: LoadedCase, out: Path, until=None, say=None, plots: bool
             f"fitting {len(fitted)} surveys of {len({b.name for b in fitted})} instruments")
         res = identify(analysis)
         say(f"  {res.status}: " + ", ".join(f"{n} = {v:.4g}" for n, v in zip(res.parameters.names, res.fit.p)))
-        ahead = forecast_surveys(analysis, res, later_blocks(analysis, stage, since))
+        ahead = forecast_surveys(analysis, res, later_blocks(analysis, stage, since), stage)
         checks = ()
         if previous is not None:
             mine = [b for b in fitted if b.stage == stage]

@@ -110,10 +110,11 @@ def _where(lab) -> str:
     return f"station {lab.station} ({-lab.y:g} m depth)" if lab.x == 0 else f"station {lab.station}"
 
 
-def forecast_surveys(analysis, result, blocks, measured: np.ndarray | None = None) -> list[SurveyForecast]:
-    """What the fit `result` (of `analysis`) forecasts for the instrument blocks `blocks` (each an
-    instrument at a stage, increments since its installation), with `measured` their readings
-    stacked in block order (None: not read yet)."""
+def forecast_surveys(analysis, result, blocks, fitted: str, measured: np.ndarray | None = None
+                     ) -> list[SurveyForecast]:
+    """What the fit `result` (of `analysis`, through stage `fitted`) forecasts for the instrument blocks
+    `blocks` (each an instrument at a stage, increments since its installation), with `measured` their
+    readings stacked in block order (None: not read yet)."""
     if not blocks:
         return []
     sim = analysis.simulation
@@ -122,13 +123,12 @@ def forecast_surveys(analysis, result, blocks, measured: np.ndarray | None = Non
     with sim.surveying(list(blocks)) as view:
         pred = view.predict(values, names, sensitivities=True)
     Cp = result.reliability.covariance
-    fitted = analysis.loaded.until
     out, r0 = [], 0
     for b in blocks:
         rows = slice(r0, r0 + b.m)
         A = pred.A[rows]
         model = A @ Cp @ A.T
-        out.append(SurveyForecast(fitted if isinstance(fitted, str) else str(fitted), b.stage, b.survey, b.name,
+        out.append(SurveyForecast(fitted, b.stage, b.survey, b.name,
                                   b.kind, tuple(b.labels), pred.x[rows].copy(), model, b.covariance,
                                   None if measured is None else measured[rows].copy()))
         r0 += b.m
