@@ -91,6 +91,7 @@ from geoback.physics.ground import COMPLEX_STEP
 from geoback.physics.names import Names
 from geoback.physics.plastic import DEG, UNMODELLED, Runs, Watch, one_thread
 from geoback.physics.plastic_zone import PlasticZone, equivalent_plastic_strain, measure
+from geoback.physics.plasticity.condensed import Region
 from geoback.physics.plasticity.linear import Counters as EngineCounters
 from geoback.physics.simulation import Field, Prediction
 
@@ -218,6 +219,7 @@ class YieldingExcavationSimulation(ExcavationSimulation):
         self.timings["assembly"] += time.perf_counter() - t0
         self.options = Options(schedule=self._schedule(increments), refine=True, backend=backend)
         self._runs = Runs()
+        self._regions = {}  # engine run key -> plasticity.condensed.Region
         self._configurations: dict = {}
         self._backend = backend or default_backend(self.fe.nfree)
         self._pardiso = self._backend == "pardiso"
@@ -229,6 +231,9 @@ class YieldingExcavationSimulation(ExcavationSimulation):
     def release(self) -> None:
         """Forget the last runs (and the warm start they offer): the next run starts from scratch."""
         self._runs.run, self._runs.kept, self._runs.warm = None, None, None
+        for region in self._regions.values():
+            region.release()
+        self._regions = {}
 
     def replaying(self, values: Mapping) -> "YieldingExcavationSimulation":
         """A copy replaying the increments of the run at `values` (no halving) with a tight Newton
@@ -240,6 +245,7 @@ class YieldingExcavationSimulation(ExcavationSimulation):
         contrast = stiffest / float(inp.E.min())  # the residual's rounding floor grows with it (a wall: 1500)
         fd.options = replace(self.options, schedule=self.solution(values).schedule, refine=False, tol=REPLAY_TOL,
                              floor=REPLAY_FLOOR * max(1.0, contrast / LINED_CONTRAST))
+        fd._regions = {}  # its own (release() frees them)
         fd.release()
         return fd
 
@@ -294,6 +300,13 @@ class YieldingExcavationSimulation(ExcavationSimulation):
             for j, value in enumerate((E, nu) + ((0.0,) * 4 if derivative else LINING_STRENGTH)):
                 fields[j][sel] = value
         return Material(*fields)
+
+    def _region(self, key, ops_k):
+        """What may yield in the engine runs of `key` (a stage, or its supports' preload), condensed and kept
+        from run to run (``plasticity.condensed``)."""
+        if key not in self._regions:
+            self._regions[key] = Region(ops_k.element_dofs(), ops_k.nfree)
+        return self._regions[key]
 
     def _configuration(self, mat: np.ndarray):
         """(active elements, active dofs, the engine's operators of that body), one per configuration."""
@@ -422,7 +435,8 @@ class YieldingExcavationSimulation(ExcavationSimulation):
                 with one_thread(self._pardiso):
                     res = solve(fe, material, state["sigma"][pts], g[dofs], [1.0], derivatives=derivs,
                                 options=replace(self.options, schedule=(schedule[key],)), operators=ops_k,
-                                warm=warm.get(key), observer=observer, f_before=before[dofs], springs=springs)
+                                warm=warm.get(key), observer=observer, f_before=before[dofs], springs=springs,
+                                region=self._region(key, ops_k))
             except NonConvergence as exc:
                 self._count(exc.counters)
                 _add(totals, exc.counters)
@@ -510,14 +524,8 @@ class YieldingExcavationSimulation(ExcavationSimulation):
                     tuple(schedule), totals, tuple(branch), e_ref, de_ref)
 
     def _count(self, c) -> None:
-        """Add an engine run's counters (plasticity.linear.Counters) to the simulation's."""
-        if c is None:
-            return
-        self.counters.factorisations += c.factorisations
-        self.counters.solves += c.backsubstitutions
-        self.counters.seconds_factorising += c.seconds.get("factorise", 0.0)
-        self.counters.seconds_solving += c.seconds.get("backsubstitute", 0.0)
-        self.counters.seconds_assembling += c.seconds.get("assemble tangent", 0.0)
+        """Add a solver run's counters (plasticity.linear.Counters) to the simulation's."""
+        self.counters.add_engine(c)
 
     # ------------------------------------------------------------------ the interface
     def stage_displacements(self, values: Mapping) -> np.ndarray:
@@ -608,8 +616,8 @@ def _add(total, c) -> None:
     """Add the counts of an engine run's counters `c` to `total` (both plasticity.linear.Counters)."""
     if c is None:
         return
-    for name in ("factorisations", "backsubstitutions", "increments", "newton_iterations", "cutbacks", "apex_points",
-                 "warm_starts", "elastic_steps"):
+    for name in ("factorisations", "factorised_unknowns", "backsubstitutions", "increments", "newton_iterations",
+                 "cutbacks", "apex_points", "warm_starts", "elastic_steps", "condensations", "condensations_reused"):
         setattr(total, name, getattr(total, name) + getattr(c, name))
     for name, seconds in c.seconds.items():
         total.seconds[name] += seconds

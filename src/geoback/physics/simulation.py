@@ -39,6 +39,20 @@ class Counters:
     seconds_factorising: float = 0.0
     seconds_solving: float = 0.0
     seconds_assembling: float = 0.0
+    factorised_unknowns: int = 0  # summed over the factorisations: their mean size is this / factorisations
+    condensations: int = 0  # elastic parts condensed onto the region that may yield (plasticity/condensed.py)
+
+    def add_engine(self, c) -> None:
+        """Add what an elastoplastic engine run spent (``plasticity.linear.Counters``)."""
+        if c is None:
+            return
+        self.factorisations += c.factorisations
+        self.factorised_unknowns += c.factorised_unknowns
+        self.condensations += c.condensations
+        self.solves += c.backsubstitutions
+        self.seconds_factorising += c.seconds.get("factorise", 0.0) + c.seconds.get("condense", 0.0)
+        self.seconds_solving += c.seconds.get("backsubstitute", 0.0) + c.seconds.get("backsubstitute: elastic part", 0.0)
+        self.seconds_assembling += c.seconds.get("assemble tangent", 0.0)
 
     def snapshot(self) -> dict:
         return dict(vars(self))

@@ -34,7 +34,8 @@ residual (2) is measured against at least ``LAM_FLOOR`` of the full release: bel
 the in-situ stress' internal force exceeds tol |lambda f| (a first release of 1e-6 failed so). A
 singular tangent is a failed Newton iteration (``linear.SingularMatrix``), as is a non-finite
 stress. A run may start each increment's Newton iteration from an earlier run's solution of it
-(``warm``); an ``observer`` sees every Newton iteration and converged increment (``Progress``: the
+(``warm``: a simulation gives the last run carried to the new values by its sensitivities,
+``Result.warm_du``); an ``observer`` sees every Newton iteration and converged increment (``Progress``: the
 progress lines and the time limit of ``plastic.py``).
 
 Direct differentiation (DDM)
@@ -65,6 +66,14 @@ complex-step evaluation of the return mapping per parameter (exact to rounding);
 is the exact derivative of the discrete solution for the schedule used: finite differences
 must replay that schedule (``Options(schedule=result.schedule)``).
 
+Factorising only what yields
+----------------------------
+With PARDISO from ``condensed.CONDENSE_FROM`` unknowns up (``Options.condense``), every tangent is
+factorised through ``condensed.Region``: the elastic part of the mesh is condensed once onto the dofs of
+the elements that may yield, and each Newton step factorises only that region plus a dense interface
+block (equations C1-C2 of ``condensed.py``). The linear algebra is the same, so Newton's iterates and
+the sensitivities (4) are the same to rounding; a caller's ``region`` is kept from run to run.
+
 API
 ---
 ``solve(fe, material, sigma0, f, stages, derivatives=None, options=None, operators=None, warm=None)``
@@ -78,6 +87,7 @@ API
 * ``derivatives``: list of :class:`ParameterDerivative` (fields default to zero).
 * ``options``: :class:`Options` (tolerance, increments, backend, fixed schedule).
 * ``warm``: the ``Result.warm`` of an earlier run (same schedule) to start each increment from.
+* ``region``: a ``condensed.Region`` kept by the caller from run to run (else one for the run, if condensing).
 
 Returns :class:`Result`: ``u`` (n_stages, nfree), ``du_dp`` (n_stages, nfree, n_params) or
 None, ``sigma`` (n_stages, ne, nq, 4), ``plastic`` / ``yielded`` (n_stages, ne, nq) booleans
@@ -107,7 +117,8 @@ import numpy as np
 
 from geoback.errors import ForwardFailure
 from geoback.physics.plasticity import mohr_coulomb as mc
-from geoback.physics.plasticity.linear import LU, Counters, SingularMatrix
+from geoback.physics.plasticity.condensed import CONDENSE_FROM, CondensedLU, Region
+from geoback.physics.plasticity.linear import LU, Counters, SingularMatrix, default_backend
 from geoback.physics.plasticity.schedule import Steps, elastic_reach
 from geoback.physics.plasticity.mohr_coulomb import Material
 from geoback.physics.plasticity.operators import PointOperators
@@ -144,6 +155,8 @@ class Options:
     schedule: tuple | None = None  # fixed: per stage, increasing fractions s in (0, 1], ending at 1
     refine: bool = False  # a fixed schedule's failed increment is halved (down to min_increment) instead of failing
     backend: str | None = None  # 'pardiso' | 'scipy' | None (plasticity.linear.default_backend)
+    condense: bool | None = None  # factorise only the region that may yield (condensed.py); None: with PARDISO
+    # from condensed.CONDENSE_FROM unknowns up
     floor: float | None = None  # a residual (2) below this that no longer halves in an iteration counts as converged:
     # the rounding floor, for a tolerance asked below it (a replay for finite differences: Newton then goes to the
     # floor, wherever that is, instead of stopping anywhere below a looser tolerance)
@@ -197,6 +210,8 @@ class Result:
     warm: dict = field(default_factory=dict)  # (stage index, s) -> u at the end of every converged increment
     dsigma: np.ndarray | None = None  # (npts, 4, n_params) d sigma/dp at the end of the last stage (the history (3)
     # a later computation continues from: element removal in stages, ``excavation_plastic.py``)
+    warm_du: dict = field(default_factory=dict)  # (stage index, s) -> du/dp (nfree, n_params) at every converged
+    # increment, with derivatives: a run at values p + dp starts there from warm + warm_du dp (first order)
 
     def converged_residuals(self) -> np.ndarray:
         """Final relative residual of every converged increment."""
@@ -303,13 +318,14 @@ class _Problem:
             return r if self.springs is None else r + self.springs @ u
 
     def tangent(self, C, mode):
-        """Consistent tangent: the elastic stiffness, corrected on the elements with plastic points."""
+        """Consistent tangent: the elastic stiffness, corrected on the elements with plastic points;
+        and those elements."""
         with self.counters.timed("assemble tangent"):
             plastic = np.flatnonzero((mode != mc.ELASTIC).reshape(self.ops.ne, self.ops.nq).any(axis=1))
             if not len(plastic):
-                return self.K_elastic
+                return self.K_elastic, plastic
             Ke = self.ops.element_matrices(C, plastic) - self.Ke_elastic[plastic]
-            return self._with_springs(self.ops.assemble(Ke, plastic, base=self.K_ground.data))
+            return self._with_springs(self.ops.assemble(Ke, plastic, base=self.K_ground.data)), plastic
 
     def elastic_response(self, elastic: LU) -> tuple[np.ndarray, np.ndarray]:
         """w = K_e^-1 f and its strain at every point (one back-substitution a run)."""
@@ -370,7 +386,7 @@ class _Problem:
                     return _Converged(u, sigma, deps, mode, C, [rel], False)
         for it in range(1, opts.max_iterations + 1):
             try:
-                u += lu.solve(-r)
+                u += lu.solve(-r, correction=True)
             except SingularMatrix as exc:
                 raise _Failed(residuals, str(exc)) from None
             self.counters.newton_iterations += 1
@@ -392,7 +408,7 @@ class _Problem:
             if it == opts.max_iterations:
                 break
             try:
-                lu = work.factorise(self.tangent(C, mode))
+                lu = work.factorise(*self.tangent(C, mode))
             except SingularMatrix as exc:
                 raise _Failed(residuals, str(exc)) from None
         raise _Failed(residuals, f"no convergence in {opts.max_iterations} iterations")
@@ -437,7 +453,8 @@ class Progress:
 
 def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = None,
           options: Options | None = None, operators: PointOperators | None = None,
-          warm: dict | None = None, observer=None, f_before: np.ndarray | None = None, springs=None) -> Result:
+          warm: dict | None = None, observer=None, f_before: np.ndarray | None = None, springs=None,
+          region: Region | None = None) -> Result:
     """Release f in increments up to each of `stages`; see the module docstring. `f_before`: a load
     (nfree,) released before this run from a state of which sigma0 is the stress (a stage of a longer
     construction): the residual (2) is then measured against ||f_before + lambda f||. `warm`: the
@@ -458,11 +475,17 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
     if springs is not None and np.shape(springs) != (ops.nfree, ops.nfree):
         raise ValueError(f"springs: expected shape ({ops.nfree}, {ops.nfree}), found {np.shape(springs)}")
     problem = _Problem(ops, mat, sig0, f, opts, counters, f_before, springs)
+    own_region = region is None
     state = _State(np.zeros(ops.nfree), sig0.copy(), 0.0)
     if der is not None:
         P = len(der.names)
         state.du, state.dsigma, state.dlam = np.zeros((ops.nfree, P)), der.sigma0.copy(), np.zeros(P)
-    conv, work = LU(counters, opts.backend), LU(counters, opts.backend)
+    region = _region(region, ops, opts, counters)
+    if region is not None:
+        region.start(problem.K_elastic, counters)
+        conv, work = CondensedLU(region, counters), CondensedLU(region, counters)
+    else:
+        conv, work = LU(counters, opts.backend), LU(counters, opts.backend)
     conv.factorise(problem.K_elastic)
     conv_elastic = True  # conv holds the elastic stiffness
     steps = Steps(opts, stages[-1])
@@ -471,6 +494,7 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
     mode = np.zeros(ops.npts, int)
     logs, schedule = [], []
     solved = {}  # (stage, s) -> u of every converged increment, to warm-start a later run
+    solved_du = {}  # (stage, s) -> du/dp there (with derivatives): a later run's start u + du/dp dp
     try:
         lam_a, dlam_a = 0.0, (np.zeros(len(der.names)) if der else None)
         for i, lam_b in enumerate(stages):
@@ -516,7 +540,7 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
                         conv_elastic = False
                 elif not (conv_elastic and n_plastic == 0):
                     try:  # the tangent at the converged state: for the sensitivities and the next increment
-                        conv.factorise(problem.tangent(res.C, res.mode))
+                        conv.factorise(*problem.tangent(res.C, res.mode))
                     except SingularMatrix as exc:
                         raise failure(f"the tangent at the converged state is singular ({exc})",
                                       res.residuals) from None
@@ -531,6 +555,8 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
                                       res.residuals) from None
                 yielded |= mode != mc.ELASTIC
                 solved[(i, s_new)] = res.u
+                if der is not None:
+                    solved_du[(i, s_new)] = new.du
                 state, s = new, s_new
                 steps.converged(s_new, len(res.residuals))
                 if observer is not None:
@@ -550,9 +576,25 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
     finally:
         conv.release()
         work.release()
+        if region is not None:
+            region.close()
+            if own_region:
+                region.release()
     return Result(stages, np.array(out["u"]), np.array(out["du"]) if der else None, der.names if der else [],
                   np.array(out["sigma"]), np.array(out["plastic"]), np.array(out["yielded"]), logs,
-                  tuple(schedule), counters, opts.tol, solved, state.dsigma if der else None)
+                  tuple(schedule), counters, opts.tol, solved, state.dsigma if der else None, solved_du)
+
+
+def _region(region: Region | None, ops: PointOperators, opts: Options, counters: Counters) -> Region | None:
+    """The region a run condenses onto (``condensed.py``): the caller's, kept from run to run, or one of its
+    own; None where the run factorises whole tangents (``Options.condense``)."""
+    backend = opts.backend or default_backend(ops.nfree)
+    wanted = opts.condense if opts.condense is not None else (backend == "pardiso" and ops.nfree >= CONDENSE_FROM)
+    if not wanted:
+        return None
+    if backend != "pardiso":
+        raise ValueError("condensing the elastic part needs the PARDISO backend")
+    return region if region is not None else Region(ops.element_dofs(), ops.nfree)
 
 
 def _sensitivities(problem: _Problem, der: _Derivatives, old: _State, new: _State, res: _Converged, lu: LU):

@@ -26,6 +26,7 @@ class Counters:
     """Work done by one forward run (and its sensitivities)."""
 
     factorisations: int = 0
+    factorised_unknowns: int = 0  # summed over the factorisations (per factorisation: the unknowns factorised)
     backsubstitutions: int = 0  # right-hand-side columns solved
     increments: int = 0  # converged load increments
     newton_iterations: int = 0  # linear solves of the Newton corrections (all attempts)
@@ -33,15 +34,17 @@ class Counters:
     apex_points: int = 0  # point updates that fell back to the apex (see mohr_coulomb.APEX)
     warm_starts: int = 0  # increments whose Newton iteration started from an earlier run's solution
     elastic_steps: int = 0  # increments every point reached elastically: one exact linear step, no Newton
+    condensations: int = 0  # elastic parts condensed onto a region that may yield (condensed.py)
+    condensations_reused: int = 0  # runs that reused the last run's condensation (scaled)
     seconds: dict = field(default_factory=lambda: defaultdict(float))
 
     def timed(self, key: str):
         return _Timer(self.seconds, key)
 
     def summary(self) -> dict:
-        out = {k: getattr(self, k) for k in ("factorisations", "backsubstitutions", "increments",
+        out = {k: getattr(self, k) for k in ("factorisations", "factorised_unknowns", "backsubstitutions", "increments",
                                                "newton_iterations", "cutbacks", "apex_points", "warm_starts",
-                                               "elastic_steps")}
+                                               "elastic_steps", "condensations", "condensations_reused")}
         out["seconds"] = {k: round(v, 4) for k, v in self.seconds.items()}
         return out
 
@@ -99,7 +102,7 @@ class LU:
         self._solver = None
         self._pattern = None
 
-    def factorise(self, A: sp.csr_matrix) -> "LU":
+    def factorise(self, A: sp.csr_matrix, plastic=None) -> "LU":
         self.n = A.shape[0]
         if self.backend is None:
             self.backend = default_backend(self.n)
@@ -122,6 +125,7 @@ class LU:
                 raise SingularMatrix(f"{self.backend} could not factorise the matrix: {exc}") from None
         self._A = A
         self.counters.factorisations += 1
+        self.counters.factorised_unknowns += self.n
         return self
 
     def _pardiso(self, A: sp.csr_matrix) -> None:
@@ -142,7 +146,8 @@ class LU:
         self._solver.set_phase(22)
         self._solver._call_pardiso(A, np.zeros((self.n, 1), order="F"))
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
+    def solve(self, rhs: np.ndarray, correction: bool = False) -> np.ndarray:
+        """A^-1 rhs (`correction`: a Newton correction, which a condensed factor may solve inexactly; here exact)."""
         if self._A is None:
             raise RuntimeError("solve() before factorise()")
         rhs = np.asarray(rhs, float)

@@ -95,6 +95,10 @@ class PointOperators:
         return new
 
     # ------------------------------------------------------------------ fields
+    def element_dofs(self) -> np.ndarray:
+        """(ne, 2nb) free-dof index of every element dof, -1 at fixed dofs."""
+        return self._redofs
+
     def strain(self, u: np.ndarray) -> np.ndarray:
         """(exx, eyy, gxy) at every point, (npts, 3), or (npts, 3, k) for u of shape (nfree, k)."""
         e = self._Bs @ u
