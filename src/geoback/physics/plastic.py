@@ -127,7 +127,7 @@ class Runs:
         if self.base is None:
             return self.warm
         base, names, warm, warm_du = self.base
-        if any(values[k] != v for k, v in base.items() if k not in names):
+        if set(values) != set(base) or any(values[k] != v for k, v in base.items() if k not in names):
             return self.warm
         dv = np.array([float(np.real(values[n])) - float(np.real(base[n])) for n in names])
         return {key: u + warm_du[key] @ dv for key, u in warm.items() if key in warm_du}

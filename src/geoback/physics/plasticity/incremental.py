@@ -111,6 +111,7 @@ increments instead of 7. The run then stops with NonConvergence (see studies/pla
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -118,7 +119,8 @@ import numpy as np
 from geoback.errors import ForwardFailure
 from geoback.physics.plasticity import mohr_coulomb as mc
 from geoback.physics.plasticity.condensed import CONDENSE_FROM, CondensedLU, Region
-from geoback.physics.plasticity.linear import LU, Counters, SingularMatrix, default_backend
+from geoback.physics.plasticity.linear import LU, Counters, SingularMatrix
+from geoback.physics.solver import available_backends
 from geoback.physics.plasticity.schedule import Steps, elastic_reach
 from geoback.physics.plasticity.mohr_coulomb import Material
 from geoback.physics.plasticity.operators import PointOperators
@@ -588,11 +590,12 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
 def _region(region: Region | None, ops: PointOperators, opts: Options, counters: Counters) -> Region | None:
     """The region a run condenses onto (``condensed.py``): the caller's, kept from run to run, or one of its
     own; None where the run factorises whole tangents (``Options.condense``)."""
-    backend = opts.backend or default_backend(ops.nfree)
-    wanted = opts.condense if opts.condense is not None else (backend == "pardiso" and ops.nfree >= CONDENSE_FROM)
+    asked = opts.backend or os.environ.get("GEOBACK_SOLVER") or "pardiso"  # SuperLU asked for: no PARDISO at all
+    pardiso = "pardiso" in available_backends() and asked == "pardiso"
+    wanted = opts.condense if opts.condense is not None else (pardiso and ops.nfree >= CONDENSE_FROM)
     if not wanted:
         return None
-    if backend != "pardiso":
+    if not pardiso:
         raise ValueError("condensing the elastic part needs the PARDISO backend")
     return region if region is not None else Region(ops.element_dofs(), ops.nfree)
 
