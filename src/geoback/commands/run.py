@@ -93,14 +93,14 @@ def run_case(loaded: LoadedCase, out: Path, method: str | None = None, progress=
 def _triggers(analysis, res, exploration, say):
     """The trigger levels (TARP: triggers.csv, the report's section) where the case gives any: the latest
     survey against them, and the probability of exceeding each at the next stage and the end."""
-    from geoback.case.loading import stage_names
-    from geoback.inference.explore import Exploration
-    from geoback.worth.forecast import unusable_estimate
-    from geoback.worth.updating import forecast_surveys, later_blocks, trigger_table
-
     case = analysis.loaded.case
     if not any(i.triggers for i in case.instruments) and not any(f.triggers for f in case.forecasts):
         return exploration
+    from geoback.case.loading import stage_names
+    from geoback.inference.explore import Exploration
+    from geoback.worth.forecast import unusable_estimate
+    from geoback.worth.updating import forecast_surveys, later_blocks, trigger_table  # (0.6 s of imports)
+
     if unusable_estimate(res):
         return exploration
     stages = stage_names(case)

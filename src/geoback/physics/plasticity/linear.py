@@ -68,7 +68,7 @@ class SingularMatrix(RuntimeError):
 # with a mechanism: SuperLU factorised it without a word and its solves were garbage, some printing BLAS
 # errors 'On entry to DTRSV parameter number 6 had an illegal value' on stderr); measured 1e-17 there
 PIVOT = 1e-14
-SMALL = 10000  # below this many unknowns SuperLU factorises unsymmetric tangents as fast as PARDISO
+SMALL = 1000  # below this many unknowns SuperLU's factorisations cost little either way (default_backend)
 # The tangent's pattern is symmetric (only its values are not): a minimum-degree ordering of A + A^t with
 # diagonal pivots preferred (threshold partial pivoting at 0.1) fills less than COLAMD; measured on a
 # 2.4 k-DOF Mohr-Coulomb tangent, 7-9 ms per factorisation against 9-14 ms (busy 2-core machine).
@@ -77,8 +77,11 @@ SUPERLU = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options={"Symm
 
 def default_backend(n: int) -> str:
     """GEOBACK_SOLVER if set; else PARDISO (when installed) from SMALL unknowns up, SuperLU below.
-    Measured here on Mohr-Coulomb tangents (2 cores, busy machine): 4.8 k DOFs SuperLU 0.056 s,
-    PARDISO 0.076 s; 18 k DOFs SuperLU 0.24 s, PARDISO 0.17 s (0.05 s with one MKL thread)."""
+    Measured on Mohr-Coulomb tangents with one thread (as the runs use), PARDISO refactorising with
+    its analysis kept (phase 22) against SuperLU: 0.73 against 1.7 ms at 0.9 k DOFs, 1.6 against 3.7 ms
+    at 1.7 k, 4.1 against 8.9 ms at 3.4 k (`geoback run cases/plastic-tunnel.yaml`, 2.4 k DOFs: 4.6
+    against 5.3 s CPU). (An earlier measurement on a busy machine, with MKL's threads and the analysis
+    counted, had SuperLU ahead up to about 10 k DOFs.)"""
     wanted = os.environ.get("GEOBACK_SOLVER")
     if wanted:
         if wanted not in available_backends():
