@@ -69,3 +69,34 @@ def test_mohr_coulomb_sensitivities_with_props_against_central_differences():
     assert sim.solution(sim.quantities()).yielded.any()
     _check_sensitivities(sim, ["E[W]", "k[P1]", "preload[P1]", "k[P2]", "preload[P2]", "c[soft]", "phi[soft]"],
                          steps=(1e-4, 1e-5, 1e-6))
+
+
+def test_condensed_engine_runs_equal_whole_factorisations_with_props():
+    """The yielding pit with props and their preload, every engine run factorising only the region that may
+    yield (plasticity/condensed.py, forced here: automatic from 10 k unknowns): readings and sensitivities as
+    with whole factorisations; a second run keeps each stage's region (condensed anew, the springs and the
+    wall not scaling with the ground's modulus)."""
+    from dataclasses import replace
+
+    from geoback.physics.solver import available_backends
+
+    if "pardiso" not in available_backends():
+        pytest.skip("condensation needs PARDISO")
+    names = ["E[soft]", "K0", "c[soft]", "phi[soft]", "k[P1]", "preload[P1]"]
+    data = _mc(preload=120.0)
+    whole = simulation(data)
+    cond = simulation(data, mesh=whole.mesh)
+    whole.options = replace(whole.options, condense=False)
+    cond.options = replace(cond.options, condense=True)
+    v = whole.quantities()
+    for values in (v, dict(v, **{"E[soft]": 1.05 * v["E[soft]"], "c[soft]": 0.97 * v["c[soft]"]})):
+        before = cond.counters.condensations
+        a = cond.predict(values, names, sensitivities=True)
+        b = whole.predict(values, names, sensitivities=True)
+        assert cond.solution(values).yielded.any()
+        assert np.abs(a.x - b.x).max() <= 1e-9 * np.abs(b.x).max()
+        for j, name in enumerate(names):
+            assert np.abs(a.A[:, j] - b.A[:, j]).max() <= 1e-8 * np.abs(b.A[:, j]).max(), name
+        assert cond.counters.condensations > before and whole.counters.condensations == 0
+    assert cond.counters.factorised_unknowns / cond.counters.factorisations \
+        < 0.7 * whole.counters.factorised_unknowns / whole.counters.factorisations

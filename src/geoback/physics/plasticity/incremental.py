@@ -115,6 +115,7 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from geoback.errors import ForwardFailure
 from geoback.physics.plasticity import mohr_coulomb as mc
@@ -311,7 +312,19 @@ class _Problem:
             self.K_elastic = self._with_springs(self.K_ground)
 
     def _with_springs(self, K):
-        return K if self.springs is None else (K + self.springs).tocsr()
+        """K + K_s on one pattern for every K of the ground's pattern (a sparse sum would drop entries that cancel,
+        and the condensed factorisation reads every tangent on the elastic stiffness' pattern)."""
+        if self.springs is None:
+            return K
+        if not hasattr(self, "_union"):
+            self._union = _union_pattern(K, sp.csr_matrix(self.springs))
+        pattern, at_K, at_S, S = self._union
+        if not K.has_sorted_indices:
+            K.sort_indices()
+        data = np.zeros(len(pattern.indices))
+        data[at_K] = K.data
+        data[at_S] += S.data
+        return sp.csr_matrix((data, pattern.indices, pattern.indptr), shape=K.shape)
 
     def residual(self, sigma, lam, u):
         """(2) with the springs' force K_s u (u: this run's displacement)."""
@@ -585,6 +598,24 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
     return Result(stages, np.array(out["u"]), np.array(out["du"]) if der else None, der.names if der else [],
                   np.array(out["sigma"]), np.array(out["plastic"]), np.array(out["yielded"]), logs,
                   tuple(schedule), counters, opts.tol, solved, state.dsigma if der else None, solved_du)
+
+
+def _union_pattern(K: sp.csr_matrix, S: sp.csr_matrix):
+    """The union of two CSR patterns (sorted) and where each matrix's entries go in it."""
+    n = K.shape[1]
+
+    def keys(M):
+        M = M.tocsr()
+        M.sort_indices()
+        rows = np.repeat(np.arange(M.shape[0], dtype=np.int64), np.diff(M.indptr))
+        return rows * n + M.indices, M
+
+    kK, K = keys(K)
+    kS, S = keys(S)
+    union = np.union1d(kK, kS)
+    indptr = np.searchsorted(union // n, np.arange(K.shape[0] + 1)).astype(np.int32)
+    pattern = sp.csr_matrix((np.zeros(len(union)), (union % n).astype(np.int32), indptr), shape=K.shape)
+    return pattern, np.searchsorted(union, kK), np.searchsorted(union, kS), S
 
 
 def _region(region: Region | None, ops: PointOperators, opts: Options, counters: Counters) -> Region | None:
