@@ -121,7 +121,7 @@ def run_geoback(loaded, measured) -> dict:
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     return dict(seconds=seconds, cpu=cpu, setup=setup, p=res.fit.p, status=res.fit.status,
                 iterations=res.fit.iterations, names=res.parameters.names, J=res.fit.J, **res.counts,
-                per_step=per_step(a.simulation.counters))
+                per_step=per_step(a.simulation.counters), condensations=a.simulation.counters.condensations)
 
 
 def run_scipy(loaded, measured) -> dict:
