@@ -14,36 +14,19 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from geoback.physics.plasticity import Material, Options, ParameterDerivative, solve
-from geoback.physics.plasticity.deep_tunnel import deep_tunnel_model
-from geoback.physics.plasticity.operators import PointOperators
+from geoback.physics.plasticity import Options, solve
 from geoback.physics.solver import available_backends
+from test_plasticity_sensitivities import BASE, T, deep_tunnel_problem
 
 pytestmark = pytest.mark.skipif("pardiso" not in available_backends(), reason="condensation needs PARDISO")
 
-P0 = 1000.0
-BASE = dict(E=1.0e5, nu=0.4, c=110.0, phi=np.radians(30.0), psi=np.radians(10.0), K0=0.9, beta=0.95)
-T = np.array([0.85, 1.0])
 WHOLE = Options(tol=1e-12, backend="pardiso", condense=False)
 CONDENSED = replace(WHOLE, condense=True)
 
 
 @pytest.fixture(scope="module")
 def tunnel():
-    fe = deep_tunnel_model(L=20.0, size_tunnel=0.25, size_far=4.0)
-    ops = PointOperators(fe)
-    sv = np.full(len(fe.wall_points), -P0)
-
-    def inputs(p):
-        mat = Material(p["E"], p["nu"], p["c"], p["phi"], p["psi"])
-        sigma0 = np.array([-p["K0"] * P0, -P0, -p["K0"] * P0, 0.0])
-        return mat, sigma0, fe.load(sv, p["K0"] * sv), p["beta"] * T
-
-    derivs = [ParameterDerivative("E", E=1.0), ParameterDerivative("nu", nu=1.0), ParameterDerivative("c", c=1.0),
-              ParameterDerivative("phi", phi=1.0), ParameterDerivative("psi", psi=1.0),
-              ParameterDerivative("K0", sigma0=np.array([-P0, 0.0, -P0, 0.0]), f=fe.load(0 * sv, sv)),
-              ParameterDerivative("beta", stages=T)]
-    return fe, ops, inputs, derivs
+    return deep_tunnel_problem()
 
 
 def _close(a, b, tol):

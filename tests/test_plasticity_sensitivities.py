@@ -27,8 +27,8 @@ T = np.array([0.85, 1.0])
 STEP = 1e-5
 
 
-@pytest.fixture(scope="module")
-def problem():
+def deep_tunnel_problem():
+    """The mesh, its operators, inputs(p) -> (material, sigma0, f, stages) and the seven parameter derivatives."""
     fe = deep_tunnel_model(L=20.0, size_tunnel=0.25, size_far=4.0)
     ops = PointOperators(fe)
     sv = np.full(len(fe.wall_points), -P0)
@@ -42,6 +42,12 @@ def problem():
               ParameterDerivative("phi", phi=1.0), ParameterDerivative("psi", psi=1.0),
               ParameterDerivative("K0", sigma0=np.array([-P0, 0.0, -P0, 0.0]), f=fe.load(0 * sv, sv)),
               ParameterDerivative("beta", stages=T)]
+    return fe, ops, inputs, derivs
+
+
+@pytest.fixture(scope="module")
+def problem():
+    fe, ops, inputs, derivs = deep_tunnel_problem()
     base = solve(fe, *inputs(BASE), derivatives=derivs, options=Options(tol=1e-12), operators=ops)
     return fe, ops, inputs, base
 
