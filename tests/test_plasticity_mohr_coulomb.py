@@ -227,3 +227,39 @@ def test_complex_step_keeps_the_real_update():
     cplx, mode_c = mc.update(sigma_n + 1e-20j * np.ones_like(sigma_n), deps, mat)
     assert np.array_equal(mode, mode_c)
     assert np.abs(cplx.real - real).max() <= 1e-13 * np.abs(real).max()
+
+
+def test_sorted_principal_stresses_are_the_stable_sort_of_the_principal_ones():
+    """The sort that places szz among the ordered in-plane pair gives what a stable descending argsort gives,
+    ties included (szz equal to the major, all three equal), real and complex-step stresses alike."""
+    rng = np.random.default_rng(0)
+    sig = rng.standard_normal((5000, 4)) * 100
+    major = 0.5 * (sig[:, 0] + sig[:, 1]) + np.hypot(0.5 * (sig[:, 0] - sig[:, 1]), sig[:, 3])
+    sig[::7, 2] = major[::7]
+    sig[::11, 1] = sig[::11, 2] = sig[::11, 0]
+    sig[::11, 3] = 0.0
+    for s in (sig, sig + 1e-30j * rng.standard_normal(sig.shape)):
+        p = mc.principal(s)[0]
+        order = np.argsort(-p.real, axis=1, kind="stable")
+        got, got_order = mc._sorted_principal(s)[:2]
+        assert np.array_equal(got_order, order)
+        assert np.array_equal(got, np.take_along_axis(p, order, axis=1))
+
+
+def test_mobilised_strength():
+    """1 on the yield surface, the ratio of deviator to strength inside, inf where the mean stress leaves none."""
+    mat = mc.Material(1e5, 0.3, 20.0, np.radians(30.0), 0.0)
+    s3 = -100.0
+    # on the surface: (s1 - s3) = 2c cos(phi) - (s1 + s3) sin(phi)  ->  s1 = (2c cos(phi) + s3 (1 - sin(phi))) / (1 + sin(phi))
+    phi = np.radians(30.0)
+    s1 = (2 * 20.0 * np.cos(phi) + s3 * (1 - np.sin(phi))) / (1 + np.sin(phi))
+    sigma = np.array([[s1, s3, 0.5 * (s1 + s3), 0.0],      # at yield
+                      [-60.0, -60.0, -60.0, 0.0],          # isotropic: nothing mobilised
+                      [100.0, 90.0, 95.0, 0.0]])           # tension beyond the apex: no strength left
+    rho = mc.mobilised(sigma, mat)
+    assert rho[0] == pytest.approx(1.0, rel=1e-12)
+    assert rho[1] == 0.0
+    assert np.isinf(rho[2])
+    inside = mc.mobilised(np.array([[0.5 * (s1 + s3) + 0.25 * (s1 - s3), 0.5 * (s1 + s3) - 0.25 * (s1 - s3),
+                                     0.5 * (s1 + s3), 0.0]]), mat)
+    assert inside[0] == pytest.approx(0.5, rel=1e-12)

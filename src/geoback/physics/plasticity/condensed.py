@@ -18,8 +18,9 @@ algebra as a factorisation of the whole tangent, so solutions and the sensitivit
 to rounding (tests/test_condensed.py).
 
 ``Region`` keeps Y and its condensation from run to run: a return mapping that finds a plastic point
-outside Y grows Y (with ``RINGS`` rings of neighbouring elements, so that the next increments rarely
-grow it again) and condenses anew; a run whose elastic stiffness is the last one times a factor (only
+outside Y grows Y, to the plastic elements, the elements close to yielding (``incremental.NEAR`` of their
+strength mobilised: the next increments' plastic zone) and ``RINGS`` rings of neighbours, so that the
+next increments rarely grow it again, and condenses anew; a run whose elastic stiffness is the last one times a factor (only
 moduli changed, the usual step of an identification) reuses the condensation scaled by that factor:
 K_II^-1 by 1/s, the correction by s. Only with PARDISO (the Schur complement is its feature) and from
 ``CONDENSE_FROM`` unknowns up, where a whole factorisation costs enough for the condensation to pay.
@@ -221,12 +222,15 @@ class Region:
             self._retire()
         self._K = K
 
-    def covering(self, plastic: np.ndarray) -> Condensation:
-        """The condensation of a region holding the elements `plastic` (indices)."""
+    def covering(self, plastic: np.ndarray, near=None) -> Condensation:
+        """The condensation of a region holding the elements `plastic` (indices); grown, it takes in the
+        elements `near()` too (close to yielding: the next increments' plastic zone)."""
         if self.current is not None and self.current.region[plastic].all():
             return self.current
         mask = self.mask.copy()
         mask[plastic] = True
+        if near is not None and len(plastic):
+            mask[near()] = True
         mask = grown(self.edofs, self.n, mask, self.rings)
         K = self._K if self.current is None else self.current._K
         scale = 1.0 if self.current is None else self.current.scale
@@ -262,8 +266,10 @@ class CondensedLU:
         self._lu = LU(counters)  # R's factor: PARDISO or SuperLU by R's size (linear.default_backend)
         self._cond = None
 
-    def factorise(self, A: sp.csr_matrix, plastic: np.ndarray | None = None) -> "CondensedLU":
-        cond = self.region.covering(np.zeros(0, int) if plastic is None else plastic)
+    def factorise(self, A: sp.csr_matrix, plastic: np.ndarray | None = None, near=None) -> "CondensedLU":
+        """`plastic`: the elements whose points yield; `near()`: the elements close to yielding, which a region
+        that must grow takes in too (asked only then)."""
+        cond = self.region.covering(np.zeros(0, int) if plastic is None else plastic, near)
         if not np.isfinite(A.data).all():
             raise SingularMatrix("the matrix has entries that are not finite numbers")
         R = cond.reduced(A)

@@ -169,8 +169,20 @@ def principal(sigma: np.ndarray):
 def _sorted_principal(sigma: np.ndarray):
     """Principal stresses sorted by real part, s1 >= s2 >= s3, with the permutation used."""
     p, m, r = principal(sigma)
-    order = np.argsort(-p.real, axis=1, kind="stable")
-    return np.take_along_axis(p, order, axis=1), order, p, r
+    a, b, z = p[:, 0].real, p[:, 1].real, p[:, 2].real
+    if not np.all(a >= b):  # (not finite): the general sort
+        order = np.argsort(-p.real, axis=1, kind="stable")
+        return np.take_along_axis(p, order, axis=1), order, p, r
+    # the in-plane pair is ordered (r >= 0): only szz is placed, as the stable descending sort places it
+    above, between = z > a, (z <= a) & (z > b)
+    order = np.tile(np.array([0, 1, 2]), (len(p), 1))
+    order[above] = (2, 0, 1)
+    order[between] = (0, 2, 1)
+    s = np.empty_like(p)
+    s[:, 0] = np.where(above, p[:, 2], p[:, 0])
+    s[:, 1] = np.where(above, p[:, 0], np.where(between, p[:, 2], p[:, 1]))
+    s[:, 2] = np.where(above | between, p[:, 1], p[:, 2])
+    return s, order, p, r
 
 
 def _mohr_coulomb(s: np.ndarray, c, phi):
@@ -183,6 +195,17 @@ def yield_functions(sigma: np.ndarray, mat: Material):
     s = _sorted_principal(sigma)[0]
     mat = mat.at(len(sigma))
     return _mohr_coulomb(s, mat.c, mat.phi), s[:, 0] - mat.tension
+
+
+def mobilised(sigma: np.ndarray, mat: Material) -> np.ndarray:
+    """The fraction of the Mohr-Coulomb strength mobilised at stresses sigma (n, 4): (s1 - s3) over its value
+    on the yield surface at the same s1 + s3 (1 at yield; inf where that mean stress leaves no strength)."""
+    s = _sorted_principal(np.real(sigma))[0]
+    mat = mat.at(len(sigma))
+    q = s[:, 0] - s[:, 2]
+    capacity = 2 * np.real(mat.c) * np.cos(np.real(mat.phi)) - (s[:, 0] + s[:, 2]) * np.sin(np.real(mat.phi))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(capacity > 0, q / np.where(capacity > 0, capacity, 1.0), np.inf)
 
 
 def _scale(s, mat):
