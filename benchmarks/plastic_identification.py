@@ -35,7 +35,7 @@ one forward run factorising whole tangents, and 15x less than the finite-differe
 (process time: what the shared machine's load does not inflate) beside wall seconds; the machine's
 load is printed at the end; --repeat N takes the median of N runs of each.
 
-    python benchmarks/plastic_identification.py [--scale 8.4] [--psi 15] [--repeat 1] [--csv out.csv]
+    python benchmarks/plastic_identification.py [--scale 8.4] [--psi 15] [--repeat 1] [--csv out.csv] [--fd-whole]
 """
 from __future__ import annotations
 
@@ -124,9 +124,10 @@ def run_geoback(loaded, measured) -> dict:
                 per_step=per_step(a.simulation.counters), condensations=a.simulation.counters.condensations)
 
 
-def run_scipy(loaded, measured) -> dict:
+def run_scipy(loaded, measured, condense: bool | None = None) -> dict:
     a, setup = fresh(loaded, measured)
     sim = a.simulation
+    sim.options = replace(sim.options, condense=condense)
     c0 = time.process_time()
     fd = fd_least_squares(a.misfit, a.parameters, tolerate_failures=True)  # nothing remembered between runs
     ls = fd["ls"]
@@ -150,6 +151,9 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--psi", type=float, default=15.0, help="dilation angle [degrees]")
     ap.add_argument("--repeat", type=int, default=1, help="runs of each measurement (median reported)")
     ap.add_argument("--csv", type=Path, default=None, help="also write the table as CSV")
+    ap.add_argument("--fd-whole", action="store_true",
+                    help="also time least_squares on runs factorising whole tangents (an FE code without the "
+                         "condensation)")
     args = ap.parse_args(argv)
     from geoback.physics.mesh import build_mesh
 
@@ -163,6 +167,7 @@ def main(argv: list[str] | None = None) -> dict:
     fs = median_of(lambda: forward(loaded, measured, True), args.repeat)
     g = median_of(lambda: run_geoback(loaded, measured), args.repeat)
     s = median_of(lambda: run_scipy(loaded, measured), args.repeat)
+    sw = median_of(lambda: run_scipy(loaded, measured, condense=False), args.repeat) if args.fd_whole else None
     ratio = s["seconds"] / g["seconds"]
     ratio_cpu = s["cpu"] / g["cpu"]
     within = g["cpu"] / f["cpu"]
@@ -192,6 +197,8 @@ def main(argv: list[str] | None = None) -> dict:
          f"{s['forward_runs']} / {s['factorisations']} / {s['solves']} / {s['nfev']} / {s['njev']} / {s['failed']}"),
         ("  estimate", f"{est(s)} (J = {s['J']:.6g}, success={s['success']})"),
         ("ratio least_squares / geoback (wall time / CPU)", f"{ratio:.1f} / {ratio_cpu:.1f}"),
+        *([("least_squares on runs with whole tangents: wall / CPU [s]; ratio to geoback (CPU)",
+            f"{sw['seconds']:.2f} / {sw['cpu']:.2f}; {sw['cpu'] / g['cpu']:.1f}")] if sw else []),
         ("ratio least_squares / geoback (forward runs)", round(s["forward_runs"] / g["forward_runs"], 1)),
         ("ratio least_squares / geoback (factorisations)", round(s["factorisations"] / g["factorisations"], 1)),
         ("wall seconds of every repeat (forward, geoback, least_squares)",
