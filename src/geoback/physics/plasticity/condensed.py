@@ -269,9 +269,9 @@ class CondensedLU:
     def factorise(self, A: sp.csr_matrix, plastic: np.ndarray | None = None, near=None) -> "CondensedLU":
         """`plastic`: the elements whose points yield; `near()`: the elements close to yielding, which a region
         that must grow takes in too (asked only then)."""
-        cond = self.region.covering(np.zeros(0, int) if plastic is None else plastic, near)
-        if not np.isfinite(A.data).all():
+        if not np.isfinite(A.data).all():  # (before the region may grow and condense for nothing)
             raise SingularMatrix("the matrix has entries that are not finite numbers")
+        cond = self.region.covering(np.zeros(0, int) if plastic is None else plastic, near)
         R = cond.reduced(A)
         if cond is not self._cond:  # a new region: R's size, pattern and backend are new
             self._lu.release()
