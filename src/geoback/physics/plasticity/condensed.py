@@ -41,6 +41,17 @@ NEGLIGIBLE = 1e-6  # a Newton residual on the elastic part below this of the who
 SAME_SCALE = 1e-12  # an elastic stiffness within this of the last one times a factor reuses its condensation
 
 
+def keyed(rows: np.ndarray, cols: np.ndarray, ncols: int) -> np.ndarray:
+    """Entries (row, col) as row-major keys row * ncols + col (what a sorted CSR pattern lists in order)."""
+    return rows.astype(np.int64) * ncols + cols
+
+
+def pattern(keys: np.ndarray, shape: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """(indptr, indices) of the sorted CSR pattern of the sorted unique `keys` (``keyed``)."""
+    indptr = np.searchsorted(keys // shape[1], np.arange(shape[0] + 1)).astype(np.int32)
+    return indptr, (keys % shape[1]).astype(np.int32)
+
+
 def _pardiso(mtype: int, schur: bool = False):
     point_pypardiso_at_mkl()
     import pypardiso
@@ -129,14 +140,13 @@ class Condensation:
         P.data = np.arange(1, P.nnz + 1, dtype=float)  # 1 + position in A.data
         PBB = P[self.B][:, self.B].tocoo()
         g = self.gamma
-        rows = np.concatenate([PBB.row, np.repeat(g, len(g))]).astype(np.int64)
-        cols = np.concatenate([PBB.col, np.tile(g, len(g))]).astype(np.int64)
-        keys = np.unique(rows * nB + cols)
-        self._indptr = np.searchsorted(keys // nB, np.arange(nB + 1)).astype(np.int32)
-        self._indices = (keys % nB).astype(np.int32)
+        at_A = keyed(PBB.row, PBB.col, nB)
+        at_C = keyed(np.repeat(g, len(g)), np.tile(g, len(g)), nB)
+        keys = np.union1d(at_A, at_C)
+        self._indptr, self._indices = pattern(keys, (nB, nB))
         self._from_A = (PBB.data - 1).astype(np.int64)
-        self._to_R = np.searchsorted(keys, PBB.row.astype(np.int64) * nB + PBB.col)
-        self._to_C = np.searchsorted(keys, np.repeat(g, len(g)).astype(np.int64) * nB + np.tile(g, len(g)))
+        self._to_R = np.searchsorted(keys, at_A)
+        self._to_C = np.searchsorted(keys, at_C)
         self._nnz = len(keys)
 
     def matches(self, K: sp.csr_matrix) -> float | None:

@@ -119,7 +119,7 @@ import scipy.sparse as sp
 
 from geoback.errors import ForwardFailure
 from geoback.physics.plasticity import mohr_coulomb as mc
-from geoback.physics.plasticity.condensed import CONDENSE_FROM, CondensedLU, Region
+from geoback.physics.plasticity.condensed import CONDENSE_FROM, CondensedLU, Region, keyed, pattern
 from geoback.physics.plasticity.linear import LU, Counters, SingularMatrix
 from geoback.physics.solver import available_backends
 from geoback.physics.plasticity.schedule import Steps, elastic_reach
@@ -311,6 +311,8 @@ class _Problem:
         with counters.timed("assemble tangent"):
             self.Ke_elastic = ops.element_matrices(mc.elastic_matrix(mat))
             self.K_ground = ops.assemble(self.Ke_elastic)
+            if springs is not None:  # every tangent plus K_s on one pattern (_with_springs)
+                self._union = _union_pattern(self.K_ground, springs)
             self.K_elastic = self._with_springs(self.K_ground)
 
     def _with_springs(self, K):
@@ -318,15 +320,13 @@ class _Problem:
         and the condensed factorisation reads every tangent on the elastic stiffness' pattern)."""
         if self.springs is None:
             return K
-        if not hasattr(self, "_union"):
-            self._union = _union_pattern(K, sp.csr_matrix(self.springs))
-        pattern, at_K, at_S, S = self._union
+        (indptr, indices), at_K, at_S, S = self._union
         if not K.has_sorted_indices:
             K.sort_indices()
-        data = np.zeros(len(pattern.indices))
+        data = np.zeros(len(indices))
         data[at_K] = K.data
         data[at_S] += S.data
-        return sp.csr_matrix((data, pattern.indices, pattern.indptr), shape=K.shape)
+        return sp.csr_matrix((data, indices, indptr), shape=K.shape)
 
     def residual(self, sigma, lam, u):
         """(2) with the springs' force K_s u (u: this run's displacement)."""
@@ -609,21 +609,17 @@ def solve(fe, material: Material, sigma0, f, stages, derivatives: list | None = 
 
 
 def _union_pattern(K: sp.csr_matrix, S: sp.csr_matrix):
-    """The union of two CSR patterns (sorted) and where each matrix's entries go in it."""
-    n = K.shape[1]
-
+    """The union of two CSR patterns (sorted): its (indptr, indices), where each matrix's entries go in it, and
+    S with sorted indices."""
     def keys(M):
-        M = M.tocsr()
+        M = sp.csr_matrix(M, copy=True)
         M.sort_indices()
-        rows = np.repeat(np.arange(M.shape[0], dtype=np.int64), np.diff(M.indptr))
-        return rows * n + M.indices, M
+        return keyed(np.repeat(np.arange(M.shape[0]), np.diff(M.indptr)), M.indices, M.shape[1]), M
 
-    kK, K = keys(K)
+    kK, _ = keys(K)
     kS, S = keys(S)
     union = np.union1d(kK, kS)
-    indptr = np.searchsorted(union // n, np.arange(K.shape[0] + 1)).astype(np.int32)
-    pattern = sp.csr_matrix((np.zeros(len(union)), (union % n).astype(np.int32), indptr), shape=K.shape)
-    return pattern, np.searchsorted(union, kK), np.searchsorted(union, kS), S
+    return pattern(union, K.shape), np.searchsorted(union, kK), np.searchsorted(union, kS), S
 
 
 def _region(region: Region | None, ops: PointOperators, opts: Options, counters: Counters) -> Region | None:
