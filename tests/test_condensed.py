@@ -108,3 +108,25 @@ def test_condensation_needs_pardiso(tunnel):
     fe, ops, inputs, derivs = tunnel
     with pytest.raises(ValueError, match="PARDISO"):
         solve(fe, *inputs(BASE), options=replace(CONDENSED, backend="scipy"), operators=ops)
+
+
+def test_factorisations_kept_from_run_to_run_analyse_a_pattern_once(tunnel):
+    """A caller's region keeps the run's two factorisations: the tangents of every run share one pattern,
+    so a later run analyses nothing (PARDISO; the condensed region's R, 0.7 k unknowns here, goes to SuperLU,
+    which has no separate analysis), and gives what a run with factorisations of its own gives, to rounding."""
+    from geoback.physics.plasticity.condensed import Region
+
+    fe, ops, inputs, derivs = tunnel
+    stiffer = dict(BASE, E=1.07 * BASE["E"])
+    for options in (WHOLE, CONDENSED):
+        region = Region(ops.element_dofs(), ops.nfree)
+        first = solve(fe, *inputs(BASE), derivatives=derivs, options=options, operators=ops, region=region)
+        again = solve(fe, *inputs(stiffer), derivatives=derivs, options=options, operators=ops, region=region)
+        own = solve(fe, *inputs(stiffer), derivatives=derivs, options=options, operators=ops)
+        if options is WHOLE:
+            assert first.counters.analyses == own.counters.analyses == 2  # the two factorisations of a run
+            assert again.counters.analyses == 0 and again.counters.factorisations > 10
+        assert _close(again.u, own.u, 1e-12)
+        assert _close(again.du_dp, own.du_dp, 1e-10)
+        region.release()
+        assert region._factors == ()  # freed

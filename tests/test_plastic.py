@@ -149,6 +149,14 @@ def test_one_run_gives_readings_and_sensitivities_and_is_counted():
     sim.predict(other)
     sim.predict(other, NAMES[:2], sensitivities=True)
     assert sim.counters.forward_runs == 2
+    # a probe (an interval's check) is no trial point: its run differentiates nothing; its readings are a fresh
+    # run's (another Newton path: the same to its convergence)
+    probe = dict(values, **{"E[marl]": 39000.0})
+    with sim.probing():
+        x = sim.predict(probe).x
+    assert sim.counters.forward_runs == 3 and sim._runs.run.names == ()
+    fresh = make_simulation(loaded_case()).predict(probe).x
+    assert np.max(np.abs(fresh - x)) <= 1e-8 * np.max(np.abs(fresh))
 
 
 def test_another_survey_on_a_shallow_copy(sim):

@@ -201,6 +201,29 @@ def test_consistent_tangent_equals_finite_differences(psi_deg):
         assert np.median(asym) > 1e-3  # non-associated: not symmetric
 
 
+@pytest.mark.parametrize("psi_deg", [30.0, 10.0, 0.0])
+def test_tangent_by_hand_equals_the_complex_step(psi_deg):
+    """The consistent tangent differentiated by hand (real inputs) is the complex-step derivative of the same
+    return mapping (complex inputs take it) to rounding, on every active set the states reach."""
+    mat, sigma_n, deps = _fd_states(np.radians(psi_deg), 9)
+    n = len(sigma_n)
+    mode = mc.select(mc.trial_stress(sigma_n, deps, mat.at(n)), mat.at(n))
+    by_hand = mc.consistent_tangent(sigma_n, deps, mat, mode)
+    stepped = mc.consistent_tangent(sigma_n.astype(complex), deps, mat, mode)
+    plastic = mode != mc.ELASTIC
+    assert plastic.sum() > 300 and len(set(mode[plastic].tolist())) >= 5
+    lam, G = mc.lame(E, NU)
+    assert np.abs(by_hand - stepped).max() <= 1e-12 * (lam + 2 * G)
+    assert np.array_equal(by_hand[~plastic], mc.elastic_matrix(mat.at(n))[~plastic])
+    # beyond the apex (no return with psi = 0): the stress is the apex whatever the strain
+    apex = Material(E, NU, C, PHI, 0.0)
+    trial = np.array([[80.0, 90.0, 95.0, 1.0]])
+    assert mc.select(trial, apex.at(1))[0] == mc.APEX
+    zero = np.zeros((1, 3))
+    assert np.abs(mc.consistent_tangent(trial, zero, apex)).max() == 0.0
+    assert np.abs(mc.consistent_tangent(trial.astype(complex), zero, apex)).max() == 0.0
+
+
 @pytest.mark.parametrize("name, h", [("E", 1e-3), ("nu", 1e-7), ("c", 1e-6), ("phi", 1e-8), ("psi", 1e-8),
                                      ("tension", 1e-6), ("sigma_n", 1e-6)])
 def test_derivatives_of_the_update_equal_finite_differences(name, h):

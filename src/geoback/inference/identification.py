@@ -587,6 +587,7 @@ def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability,
     two (every: all)."""
     CHI2_1_95 = 3.841458820694124  # chi^2_1 at 95 % (profile.CHI2_1_95; scipy.optimize loads only if needed)
     params = misfit.parameters
+    sim = misfit.simulation
     p, J0 = result.p, result.J
     lo_lin, hi_lin = rel.interval95()
     out = {}
@@ -607,7 +608,8 @@ def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability,
                 q = p + sign * d
                 if np.all(q >= params.lower) and np.all(q <= params.upper):
                     try:
-                        rise = misfit.J(q) - J0
+                        with sim.probing():  # (not a fit's trial point: nothing to differentiate ahead)
+                            rise = misfit.J(q) - J0
                     except Exception:  # noqa: BLE001 - a failed forward run says the linearisation is off
                         rise = np.inf
                     need = need or not 0.5 * CHI2_1_95 <= rise <= 2 * CHI2_1_95  # off by a factor 2

@@ -228,6 +228,9 @@ class YieldingExcavationSimulation(ExcavationSimulation):
     def solver(self) -> str | None:
         return self._backend if self.counters.factorisations else None
 
+    def probing(self):
+        return self._runs.probing()
+
     def release(self) -> None:
         """Forget the last runs (and the warm start they offer): the next run starts from scratch."""
         self._runs.run, self._runs.kept, self._runs.warm = None, None, None

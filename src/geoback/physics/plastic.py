@@ -50,6 +50,7 @@ ground (refused by the case checks), cross-anisotropic elasticity.
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import time
 from dataclasses import dataclass, replace
@@ -119,6 +120,7 @@ class Runs:
         self.base: tuple | None = None  # the last run with sensitivities: (values, names, warm, warm_du)
         self.wanted: tuple = ()
         self.plain_requests = 0
+        self.probes = 0  # open ``probing()`` contexts: readings-only runs there differentiate nothing
         self.number = 0  # runs started (for progress lines)
 
     def predicted(self, values: Mapping) -> dict | None:
@@ -152,9 +154,20 @@ class Runs:
             self.kept = run
         return run
 
+    @contextlib.contextmanager
+    def probing(self):
+        """Readings-only runs asked inside are probes, not an optimiser's trial points: no sensitivities ahead."""
+        self.probes += 1
+        try:
+            yield
+        finally:
+            self.probes -= 1
+
     def _names_to_compute(self, values: Mapping, wrt: Sequence[str]) -> tuple:
         if wrt:
             return tuple(wrt)
+        if self.probes:
+            return ()
         self.plain_requests += 1
         if self.plain_requests <= ANTICIPATE:
             return tuple(n for n in self.wanted if n in values)
@@ -364,6 +377,9 @@ class PlasticSimulation(Simulation):
     def stage_displacements(self, values: Mapping) -> np.ndarray:
         """u_k on the free dofs after every stage (nstages, nfree)."""
         return self.solution(values).u
+
+    def probing(self):
+        return self._runs.probing()
 
     def release(self) -> None:
         """Forget the last runs (and the warm start they offer): the next run starts from scratch."""

@@ -18,6 +18,7 @@ survey, counters), the ``Names`` it honours (``names.py``) and components of its
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import time
 from abc import ABC, abstractmethod
@@ -41,6 +42,7 @@ class Counters:
     seconds_assembling: float = 0.0
     factorised_unknowns: int = 0  # summed over the factorisations: their mean size is this / factorisations
     condensations: int = 0  # elastic parts condensed onto the region that may yield (plasticity/condensed.py)
+    analyses: int = 0  # symbolic analyses of a sparsity pattern by an elastoplastic engine (plasticity/linear.py)
 
     def add_engine(self, c) -> None:
         """Add what an elastoplastic engine run spent (``plasticity.linear.Counters``)."""
@@ -49,6 +51,7 @@ class Counters:
         self.factorisations += c.factorisations
         self.factorised_unknowns += c.factorised_unknowns
         self.condensations += c.condensations
+        self.analyses += c.analyses
         self.solves += c.backsubstitutions
         self.seconds_factorising += c.seconds.get("factorise", 0.0) + c.seconds.get("condense", 0.0)
         self.seconds_solving += c.seconds.get("backsubstitute", 0.0) + c.seconds.get("backsubstitute: elastic part", 0.0)
@@ -298,6 +301,12 @@ class Simulation(ABC):
 
     def release(self) -> None:
         """Free memory held by factorisations (the simulation stays usable)."""
+
+    def probing(self):
+        """A context in which readings asked without sensitivities are probes (an interval's check) and not an
+        optimiser's trial points, which a non-linear simulation may differentiate ahead in case one is accepted
+        (``plastic.Runs``): there it does not."""
+        return contextlib.nullcontext()
 
     def replaying(self, values: Mapping) -> "Simulation":
         """A simulation whose readings near `values` are the same discrete function of the values as

@@ -26,6 +26,7 @@ class Counters:
     """Work done by one forward run (and its sensitivities)."""
 
     factorisations: int = 0
+    analyses: int = 0  # symbolic analyses (orderings) of a new sparsity pattern (PARDISO phase 11)
     factorised_unknowns: int = 0  # summed over the factorisations (per factorisation: the unknowns factorised)
     backsubstitutions: int = 0  # right-hand-side columns solved
     increments: int = 0  # converged load increments
@@ -42,7 +43,7 @@ class Counters:
         return _Timer(self.seconds, key)
 
     def summary(self) -> dict:
-        out = {k: getattr(self, k) for k in ("factorisations", "factorised_unknowns", "backsubstitutions", "increments",
+        out = {k: getattr(self, k) for k in ("factorisations", "analyses", "factorised_unknowns", "backsubstitutions", "increments",
                                                "newton_iterations", "cutbacks", "apex_points", "warm_starts",
                                                "elastic_steps", "condensations", "condensations_reused")}
         out["seconds"] = {k: round(v, 4) for k, v in self.seconds.items()}
@@ -153,8 +154,13 @@ class LU:
             self._solver.set_phase(11)
             self._solver._call_pardiso(A, np.zeros((self.n, 1), order="F"))
             self._pattern = (A.indptr.copy(), A.indices.copy())
+            self.counters.analyses += 1
         self._solver.set_phase(22)
         self._solver._call_pardiso(A, np.zeros((self.n, 1), order="F"))
+
+    def attach(self, counters: Counters) -> None:
+        """Count this factor's work in `counters` (a new run's; the analysis of the pattern is kept)."""
+        self.counters = counters
 
     def solve(self, rhs: np.ndarray, correction: bool = False) -> np.ndarray:
         """A^-1 rhs (`correction`: a Newton correction, which a condensed factor may solve inexactly; here exact)."""

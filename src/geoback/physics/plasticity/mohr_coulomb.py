@@ -52,10 +52,13 @@ Derivatives. Every function is written complex-safe: branch decisions (elastic o
 active set, the order of the principal stresses) are taken on real parts, the arithmetic
 carries complex numbers. Derivatives of the update are then taken by complex step,
 d sigma/dx = Im sigma(x + i h dx) / h, exact to rounding (no subtractive cancellation):
-:func:`consistent_tangent` gives the algorithmic tangent d sigma/d(strain increment) (4x3,
-non-symmetric when psi != phi), :func:`directional_derivative` the derivative along any
-direction of (stress at the start, strain increment, material) - what direct differentiation
-of the incremental problem needs.
+:func:`directional_derivative` gives the derivative along any direction of (stress at the start,
+strain increment, material) - what direct differentiation of the incremental problem needs.
+:func:`consistent_tangent`, the algorithmic tangent d sigma/d(strain increment) (4x3, non-symmetric
+when psi != phi) asked at every Newton iteration, is differentiated by hand for real inputs (each
+return is affine in the sorted trial principal stresses; the eigenprojection's derivative added):
+the same function, equal to its complex step to rounding (tested), and computed in the same pass as
+the stresses: :func:`update_with_tangent` 1.3 ms against 2.4 ms at 3.4 k points (the shipped plastic case).
 """
 from __future__ import annotations
 
@@ -114,6 +117,8 @@ class Material:
 
     def at(self, n: int) -> "Material":
         """Every field as a 1-D array of n points."""
+        if all(isinstance(v, np.ndarray) and v.shape == (n,) for v in self.values()):
+            return self
         out = []
         for v in self.values():
             v = np.asarray(v)
@@ -235,16 +240,21 @@ def _planes(mat: Material, sel: tuple[int, ...]):
     return A, N, b
 
 
-def _return_to(s: np.ndarray, mat: Material, sel: tuple[int, ...]):
+def _return_to(s: np.ndarray, mat: Material, sel: tuple[int, ...], slope: bool = False):
     """Backward-Euler return of sorted trial principal stresses s (n, 3) to the active planes
-    sel: returns the principal stresses, the multipliers and a flag of solvable systems."""
+    sel: returns the principal stresses, the multipliers and a flag of solvable systems (and with
+    `slope` its derivative by s, I - De N M^-1 A (n, 3, 3): the return is affine in s)."""
     lam, G = lame(mat.E, mat.nu)
     A, N, b = _planes(mat, sel)
     DN = lam[:, None, None] * N.sum(axis=1, keepdims=True) + 2 * G[:, None, None] * N  # De n_j
     M = A @ DN
     rhs = np.einsum("nkx,nx->nk", A, s) - b
     dgamma, ok = _small_solve(M, rhs)
-    return s - np.einsum("nxj,nj->nx", DN, dgamma), dgamma, ok, G
+    out = s - np.einsum("nxj,nj->nx", DN, dgamma), dgamma, ok, G
+    if slope:
+        M = np.where(ok[:, None, None], M, np.eye(len(sel)))
+        out += (np.eye(3) - DN @ np.linalg.solve(M, A),)
+    return out
 
 
 def _small_solve(M, rhs):
@@ -286,7 +296,7 @@ def select(sigma_trial: np.ndarray, mat: Material) -> np.ndarray:
     sigma_trial = sigma_trial.real
     mat = Material(*(np.asarray(v).real for v in mat.values())).at(len(sigma_trial))
     s = _sorted_principal(sigma_trial)[0]
-    f, ft = yield_functions(sigma_trial, mat)
+    f, ft = _mohr_coulomb(s, mat.c, mat.phi), s[:, 0] - mat.tension  # (yield_functions, sorted once)
     tol = YIELD_TOL * _scale(s, mat)
     mode = np.full(len(s), ELASTIC)
     todo = np.flatnonzero((f > tol) | (ft > tol))
@@ -316,20 +326,35 @@ def return_map(sigma_trial: np.ndarray, mat: Material, mode: np.ndarray | None =
         mode = select(sigma_trial, mat)
     sigma = np.array(sigma_trial, dtype=np.result_type(sigma_trial, *mat.values(), float))
     plastic = np.flatnonzero(mode != ELASTIC)
-    if not len(plastic):
-        return sigma, mode
-    st = sigma[plastic]
-    m_p = mat.take(plastic)
+    if len(plastic):
+        sigma[plastic] = _return(sigma[plastic], mat.take(plastic), mode[plastic])
+    return sigma, mode
+
+
+def _return(st: np.ndarray, mat: Material, mode: np.ndarray, D: np.ndarray | None = None):
+    """The return of plastic points: their stresses (k, 4) from the trial st and their modes; with D =
+    d st / d deps (k, 4, 3; real inputs only) also d sigma / d deps (k, 4, 3), differentiated by hand,
+    and a flag of the points where that holds (the trial's in-plane principal stresses apart, where
+    their eigenprojection has a derivative; elsewhere the complex step of :func:`consistent_tangent`).
+
+    In sorted principal space each return is affine in the trial (``_return_to(slope=True)``; 0 at
+    the apex); the principal stresses are p = (m + r, m - r, szz), and sigma = s_- I + (s_+ - s_-) P_+
+    with P_+ = (S_tr - p_- I) / (2 r), the trial's eigenprojection. By hand, this is the function the
+    complex step differentiates, and equal to it to rounding (tested)."""
+    k = len(st)
     s, order, p, r = _sorted_principal(st)
     ret = np.empty_like(s)
-    mp = mode[plastic]
-    for k, sel in enumerate(CANDIDATES, start=1):
-        i = np.flatnonzero(mp == k)
+    T = None if D is None else np.zeros((k, 3, 3))
+    for kk, sel in enumerate(CANDIDATES, start=1):
+        i = np.flatnonzero(mode == kk)
         if len(i):
-            ret[i] = _return_to(s[i], m_p.take(i), sel)[0]
-    i = np.flatnonzero(mp == APEX)
+            back = _return_to(s[i], mat.take(i), sel, slope=D is not None)
+            ret[i] = back[0]
+            if D is not None:
+                T[i] = back[4]
+    i = np.flatnonzero(mode == APEX)
     if len(i):
-        m_a = m_p.take(i)
+        m_a = mat.take(i)
         with np.errstate(divide="ignore"):  # phi = 0 has no apex (and never lands here)
             apex = m_a.c / np.tan(m_a.phi)
         apex = np.where(np.isfinite(m_a.tension.real) & (m_a.tension.real < apex.real), m_a.tension, apex)
@@ -339,14 +364,30 @@ def return_map(sigma_trial: np.ndarray, mat: Material, mode: np.ndarray | None =
     # sigma = s_- I + (s_+ - s_-) P_+,  P_+ = (S - lambda_- I) / (2 r): the trial's eigenprojections
     xx, yy, xy = st[:, 0], st[:, 1], st[:, 3]
     lam_minus = p[:, 1]
-    split = np.abs(r.real) > 1e-14 * _scale(s, m_p)
+    split = np.abs(r.real) > 1e-14 * _scale(s, mat)
     r_safe = np.where(split, r, 1.0)
     ratio = np.where(split, (out[:, 0] - out[:, 1]) / (2 * r_safe), 0.0)
-    sigma[plastic, 0] = out[:, 1] + ratio * (xx - lam_minus)
-    sigma[plastic, 1] = out[:, 1] + ratio * (yy - lam_minus)
-    sigma[plastic, 2] = out[:, 2]
-    sigma[plastic, 3] = ratio * xy
-    return sigma, mode
+    sigma = np.empty_like(st)
+    sigma[:, 0] = out[:, 1] + ratio * (xx - lam_minus)
+    sigma[:, 1] = out[:, 1] + ratio * (yy - lam_minus)
+    sigma[:, 2] = out[:, 2]
+    sigma[:, 3] = ratio * xy
+    if D is None:
+        return sigma
+    # along the three strain directions, d st = D[:, :, j]; s = p[order], so d out = T[inv, inv] d p
+    inv = np.argsort(order, axis=1)
+    Tp = T[np.arange(k)[:, None, None], inv[:, :, None], inv[:, None, :]]
+    dxx, dyy, dzz, dxy = D[:, 0], D[:, 1], D[:, 2], D[:, 3]  # (k, 3)
+    dm = 0.5 * (dxx + dyy)
+    dr = (0.5 * (xx - yy)[:, None] * 0.5 * (dxx - dyy) + xy[:, None] * dxy) / r_safe[:, None]
+    dout = Tp @ np.stack([dm + dr, dm - dr, dzz], axis=1)
+    dratio = (dout[:, 0] - dout[:, 1]) / (2 * r_safe[:, None]) - (ratio / r_safe)[:, None] * dr
+    C = np.empty((k, 4, 3))
+    C[:, 0] = dout[:, 1] + dratio * (xx - lam_minus)[:, None] + ratio[:, None] * (dxx - (dm - dr))
+    C[:, 1] = dout[:, 1] + dratio * (yy - lam_minus)[:, None] + ratio[:, None] * (dyy - (dm - dr))
+    C[:, 2] = dout[:, 2]
+    C[:, 3] = dratio * xy[:, None] + ratio[:, None] * dxy
+    return sigma, C, split
 
 
 def update(sigma_n: np.ndarray, deps: np.ndarray, mat: Material, mode: np.ndarray | None = None):
@@ -359,8 +400,30 @@ def update_with_tangent(sigma_n: np.ndarray, deps: np.ndarray, mat: Material):
     """Stress after the increment (n, 4), its consistent tangent d sigma / d deps (n, 4, 3) and the
     mode of every point (ELASTIC, active set k >= 1, APEX)."""
     mat = mat.at(len(sigma_n))
-    sigma, mode = update(sigma_n, deps, mat)
-    return sigma, consistent_tangent(sigma_n, deps, mat, mode), mode
+    if _complex(sigma_n, deps, mat):
+        sigma, mode = update(sigma_n, deps, mat)
+        return sigma, consistent_tangent(sigma_n, deps, mat, mode), mode
+    return _update_with_tangent(sigma_n, deps, mat, None)
+
+
+def _complex(sigma_n, deps, mat) -> bool:
+    return any(np.iscomplexobj(v) for v in (sigma_n, deps, *mat.values()))
+
+
+def _update_with_tangent(sigma_n, deps, mat: Material, mode):
+    """update_with_tangent for real inputs (n points): the plastic points' stresses and tangents in one pass."""
+    C = elastic_matrix(mat)
+    sigma = sigma_n + _elastic_increment(*lame(mat.E, mat.nu), deps)
+    if mode is None:
+        mode = select(sigma, mat)
+    plastic = np.flatnonzero(mode != ELASTIC)
+    if len(plastic):
+        sigma[plastic], C_p, split = _return(sigma[plastic], mat.take(plastic), mode[plastic], C[plastic])
+        C[plastic[split]] = C_p[split]
+        rest = plastic[~split]
+        if len(rest):  # (the eigenprojection without a derivative: the complex step)
+            C[rest] = consistent_tangent(sigma_n[rest].astype(complex), deps[rest], mat.take(rest), mode[rest]).real
+    return sigma, C, mode
 
 
 def _complex_step(sigma_n, deps, mat, mode, d_sigma_n=None, d_deps=None, d_mat=None):
@@ -379,13 +442,16 @@ def _complex_step(sigma_n, deps, mat, mode, d_sigma_n=None, d_deps=None, d_mat=N
 
 def consistent_tangent(sigma_n: np.ndarray, deps: np.ndarray, mat: Material,
                        mode: np.ndarray | None = None) -> np.ndarray:
-    """Algorithmic tangent d sigma_{n+1} / d deps (n, 4, 3): the elastic D at elastic points,
-    the complex-step derivative of the return mapping at plastic ones."""
+    """Algorithmic tangent d sigma_{n+1} / d deps (n, 4, 3): the elastic D at elastic points; at
+    plastic ones the derivative of the return mapping, by hand for real inputs (``_return``), by
+    complex step for complex ones and where the trial's in-plane principal stresses coincide."""
     n = len(sigma_n)
     mat = mat.at(n)
+    if not _complex(sigma_n, deps, mat):
+        return _update_with_tangent(sigma_n, deps, mat, mode)[1]
     if mode is None:
         mode = select(trial_stress(sigma_n, deps, mat), mat)
-    C = elastic_matrix(mat).copy()
+    C = elastic_matrix(mat)
     plastic = np.flatnonzero(mode != ELASTIC)
     if len(plastic):
         m_p = mat.take(plastic)
