@@ -244,6 +244,24 @@ def test_derivatives_of_the_update_equal_finite_differences(name, h):
     assert np.abs(fd - exact)[keep].max() <= 1e-5 * scale
 
 
+def test_derivatives_along_many_directions_at_once_equal_one_at_a_time():
+    mat, sigma_n, deps = _fd_states(np.radians(10.0), 11)
+    n = len(sigma_n)
+    mode = mc.select(mc.trial_stress(sigma_n, deps, mat.at(n)), mat.at(n))
+    rng = np.random.default_rng(12)
+    d_sigma, d_deps = rng.normal(0.0, 1.0, (n, 4, 4)), rng.normal(0.0, 1e-3, (n, 3, 4))
+    d_sigma[:, :, 3] = 0.0  # a direction of the material only
+    d_deps[:, :, 3] = 0.0
+    zero = {k: 0.0 for k in Material.names()}
+    d_mats = [Material(**{**zero, "E": 1.0}), None, Material(**{**zero, "phi": 1.0, "c": 2.0}),
+              Material(**{**zero, "psi": 1.0})]
+    many = mc.directional_derivatives(sigma_n, deps, mat, d_sigma, d_deps, d_mats, mode)
+    assert (mode != mc.ELASTIC).sum() > 300
+    for j in range(4):
+        one = mc.directional_derivative(sigma_n, deps, mat, d_sigma[:, :, j], d_deps[:, :, j], d_mats[j], mode)
+        assert np.abs(many[:, :, j] - one).max() <= 1e-13 * np.abs(one).max(), j
+
+
 def test_complex_step_keeps_the_real_update():
     mat, sigma_n, deps = _fd_states(np.radians(10.0), 8)
     real, mode = mc.update(sigma_n, deps, mat)

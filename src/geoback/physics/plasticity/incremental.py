@@ -642,11 +642,8 @@ def _sensitivities(problem: _Problem, der: _Derivatives, old: _State, new: _Stat
     with timed("sensitivities"):
         with timed("sensitivities: local derivatives and right-hand sides"):
             P = len(der.names)
-            e = np.empty((ops.npts, 4, P))
-            d_deps = -ops.strain(old.du)  # (npts, 3, P)
-            for j in range(P):
-                e[:, :, j] = mc.directional_derivative(old.sigma, res.deps, problem.mat, old.dsigma[:, :, j],
-                                                       d_deps[:, :, j], der.material[j], res.mode)
+            e = mc.directional_derivatives(old.sigma, res.deps, problem.mat, old.dsigma, -ops.strain(old.du),
+                                           der.material, res.mode)
             rhs = problem.f[:, None] * new.dlam[None, :] + new.lam * der.f - ops.internal_force(e - der.sigma0)
             for j, dK in enumerate(der.springs or ()):
                 if dK is not None:
