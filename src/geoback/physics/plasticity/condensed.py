@@ -81,7 +81,15 @@ class _Cholesky:
         return np.asarray(self._s._call_pardiso(self._A, np.asfortranarray(B))).reshape(B.shape)
 
     def release(self) -> None:
-        self._s.free_memory(everything=True)
+        if self._s is not None:
+            self._s.free_memory(everything=True)
+            self._s = None
+
+    def __del__(self):  # PARDISO's memory is MKL's, not Python's: freed with the object if not released before
+        try:
+            self.release()
+        except Exception:  # noqa: BLE001 - (at interpreter exit MKL may be gone already)
+            pass
 
 
 def schur_complement(upper: sp.csr_matrix, last: np.ndarray) -> np.ndarray:

@@ -187,3 +187,9 @@ class LU:
         self._lu = None
         self._pattern = None
 
+    def __del__(self):  # PARDISO's memory is MKL's, not Python's: freed with the object if not released before
+        try:
+            self.release()
+        except Exception:  # noqa: BLE001 - (at interpreter exit MKL may be gone already)
+            pass
+
