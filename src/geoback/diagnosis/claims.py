@@ -31,6 +31,21 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    explains the readings within the evidence: both are listed with the readings that separate them
    (compare.separation).
 4. Determined: every extra parameter determined by the readings and off its search bounds.
+5. An instrument alone (``instrument_alone``), for a hypothesis on one instrument only (an error of
+   that instrument: its reference end, a bias shift, a depth offset). Check 1 cannot test it: with
+   the instrument left out its parameter is not informed, and the left-out score drops that share.
+   What such a claim says instead is that the instrument, and nothing else, is wrong, so that
+   (a) the readings of every other instrument are explained by the model fitted to them alone
+   (Gauss-Newton steps from the refit's optimum, the instrument's own parameters not informed and
+   not moved: J_-i against chi^2(m_-i - n_-i), rows left less the parameters they inform), and
+   (b) every instrument left out in turn is predicted within its band (T_j of check 1 against
+   chi^2 of its readings less the directions its band leaves unbounded); Bonferroni over these tests
+   at STRUCTURE_ALPHA. Ground physics the library lacks that shows most at one instrument (a
+   surrogate the instrument error stands in for) also shows at the others, and fails it.
+6. Adequacy (``adequacy``), after the final joint fit: a cause is named only when the model with it
+   (and every cause accepted with it) explains the readings, chi^2 test at STRUCTURE_ALPHA. A model
+   still inadequate misses something the library lacks, and what it lacks may be what an accepted
+   cause stands in for (a stratum and a negative gradient in place of a yielding zone).
 """
 from __future__ import annotations
 
@@ -51,7 +66,7 @@ FLOOR = 1e-8  # relative eigenvalue of the scaled information below which a dire
 
 @dataclass
 class Check:
-    name: str  # 'cross-validation', 'residual-structure', 'rivals', 'determined'
+    name: str  # 'cross-validation', 'residual-structure', 'rivals', 'determined', 'instrument-alone', 'adequacy'
     passed: bool
     text: str  # one sentence
     detail: dict = field(default_factory=dict)
@@ -71,6 +86,13 @@ def _instrument_rows(data) -> dict[str, np.ndarray]:
 def left_out_scores(misfit: Misfit, p: np.ndarray) -> dict[str, tuple[float, int]]:
     """{instrument: (T_i, readings)}: each instrument's readings scored against the prediction of
     the model refitted without them (module docstring, check 1)."""
+    return {k: v[:2] for k, v in _left_out(misfit, p).items()}
+
+
+def _left_out(misfit: Misfit, p: np.ndarray) -> dict[str, tuple[float, int, int]]:
+    """{instrument: (T_i, readings, dof)}: ``left_out_scores`` with the degrees of freedom of T_i under
+    the model (its readings less the directions their band leaves unbounded: the parameters only
+    instrument i informs)."""
     p = np.asarray(p, float)
     ev = misfit.evaluate(p, jacobian=True)
     r, B = np.asarray(ev.r, float), np.asarray(ev.B, float)
@@ -95,7 +117,9 @@ def left_out_scores(misfit: Misfit, p: np.ndarray) -> dict[str, tuple[float, int
             e = ri - Bi @ (q - p)
         Bs = Bi / d
         band = np.eye(len(rows)) + Bs @ inv_band @ Bs.T
-        out[name] = (float(e @ np.linalg.solve(band, e)), len(rows))
+        free = Bs @ V[:, ~informed]  # what the uninformed directions do to instrument i's readings
+        lost = int(np.linalg.matrix_rank(free, tol=1e-8 * max(np.abs(Bs).max(), 1e-300))) if free.size else 0
+        out[name] = (float(e @ np.linalg.solve(band, e)), len(rows), len(rows) - lost)
     return out
 
 
@@ -105,7 +129,7 @@ def cross_validation(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.nd
     try:
         tb, te = left_out_scores(base, p_base), left_out_scores(ext, p_ext)
     except Exception as exc:  # noqa: BLE001 - a check that cannot run does not pass
-        return Check("cross-validation", False, f"the cross-validation could not be computed ({exc})")
+        return Check("cross-validation", False, f"the cross-validation could not be computed ({exc})", {"error": True})
     if len(te) < 2:
         return Check("cross-validation", True, "one instrument only: nothing to cross-validate against",
                      {"applicable": False})
@@ -198,6 +222,101 @@ def rival_check(acc, found: list) -> Check:
     names = "; ".join(f"{s.hypothesis.title} (ΔAIC {s.aic - acc.aic:+.2g})" for s in found) + scaled
     return Check("rivals", False, f"another family explains the readings within the evidence: {names}",
                  {"rivals": [s.hypothesis.key for s in found]})
+
+
+def single_instrument(names) -> str | None:
+    """The instrument a hypothesis' parameters all belong to (bias[I1], zoff[I1], B[I1]: 'I1'), or None
+    when it touches the ground model or more than one instrument."""
+    from geoback.physics.simulation import is_instrument_term
+
+    owners = {n.split("[", 1)[1].rstrip("]") if "[" in n else None for n in names}
+    if not names or not all(is_instrument_term(n) for n in names) or len(owners) != 1 or None in owners:
+        return None
+    return owners.pop()
+
+
+GN_STEPS = 4  # Gauss-Newton steps of the refit without one instrument (each one forward run with sensitivities)
+
+
+def fit_without(misfit: Misfit, p: np.ndarray, rows: np.ndarray) -> tuple[float, int, np.ndarray]:
+    """The model refitted with the readings `rows` left out: (J of every other row, the rows left less
+    the parameter directions they inform, the parameters). Up to GN_STEPS Gauss-Newton steps from `p`,
+    stopping at the first that does not lower J; the directions the rows left do not inform are not
+    moved (as in ``left_out_scores``)."""
+    params = misfit.parameters
+    q = np.asarray(p, float).copy()
+    keep = np.ones(misfit.evaluate(q).r.shape[0], bool)
+    keep[rows] = False
+    best = (float("inf"), q, 0)
+    for k in range(GN_STEPS + 1):
+        ev = misfit.evaluate(q, jacobian=k < GN_STEPS)
+        rk = np.asarray(ev.r, float)[keep]
+        J = float(rk @ rk)
+        if not J < best[0]:
+            break
+        if k == GN_STEPS:
+            best = (J, q, best[2])
+            break
+        Bk = np.asarray(ev.B, float)[keep]
+        d = np.sqrt(np.maximum(np.sum(Bk * Bk, axis=0), 1e-300))
+        Fk = (Bk.T @ Bk) / np.outer(d, d)
+        w, V = np.linalg.eigh((Fk + Fk.T) / 2)
+        on = w > FLOOR * max(float(w.max()), 1e-300)
+        best = (J, q, int(on.sum()))
+        step = ((V[:, on] / w[on]) @ V[:, on].T @ ((Bk.T @ rk) / d)) / d
+        q = np.clip(q + step, params.lower, params.upper)
+    J, q, informed = best
+    return J, int(keep.sum()) - informed, q
+
+
+def instrument_alone(misfit: Misfit, p: np.ndarray, instrument: str, alpha: float = STRUCTURE_ALPHA) -> Check:
+    """Check 5: an error of `instrument` alone explains the readings (module docstring): the other
+    instruments' readings are explained by the model fitted without it, and every instrument left out
+    in turn is predicted within its band; Bonferroni over these tests at `alpha`."""
+    from geoback.inference.reliability import chi2_sf
+
+    rows = _instrument_rows(misfit.data)
+    if instrument not in rows or len(rows) < 2:
+        return Check("instrument-alone", True, "no other instrument to check it against", {"applicable": False})
+    try:
+        J, dof, _ = fit_without(misfit, p, rows[instrument])
+        scores = _left_out(misfit, p)
+    except Exception as exc:  # noqa: BLE001 - a check that cannot run does not pass
+        return Check("instrument-alone", False, f"the fit without {instrument} could not be computed ({exc})",
+                     {"error": True})
+    tests = {f"the other instruments fitted without {instrument}": (J, dof)}
+    tests.update({f"{k} left out": (T, n) for k, (T, _, n) in scores.items()})
+    tests = {k: (T, n, float(chi2_sf(T, n))) for k, (T, n) in tests.items() if n > 0}
+    if not tests:
+        return Check("instrument-alone", True, "no readings to spare to check it against", {"applicable": False})
+    level = alpha / len(tests)
+    detail = {"instrument": instrument, "level": level,
+              "tests": {k: {"chi2": T, "dof": n, "p_value": pv} for k, (T, n, pv) in tests.items()}}
+    bad = [f"{k}: χ² {T:.3g} on {n} dof, p = {pv:.2g}" for k, (T, n, pv) in tests.items() if pv < level]
+    T0, n0, p0 = tests.get(f"the other instruments fitted without {instrument}", (np.nan, 0, np.nan))
+    if not bad:
+        return Check("instrument-alone", True, f"an error of {instrument} alone explains the readings: every other "
+                                               f"instrument is explained without it (χ² {T0:.3g} on {n0} dof, p = "
+                                               f"{p0:.2g}) and each instrument left out is predicted within its band "
+                                               f"(level {level:.2g} per test)", detail)
+    return Check("instrument-alone", False,
+                 f"an error of {instrument} alone does not explain the readings ({'; '.join(bad)}; level {level:.2g} "
+                 f"per test): ground physics the library lacks, showing most at {instrument}, would leave that too",
+                 detail)
+
+
+def adequacy(chi2: float, dof: int, p_value: float, alpha: float = STRUCTURE_ALPHA) -> Check:
+    """Check 6: the final model, with every accepted cause, explains the readings (chi^2 test)."""
+    detail = {"chi2": chi2, "dof": dof, "p_value": p_value, "level": alpha}
+    if dof <= 0 or not np.isfinite(p_value):
+        return Check("adequacy", True, "no degrees of freedom left to test the final model", {"applicable": False})
+    if p_value >= alpha:
+        return Check("adequacy", True, f"the final model explains the readings (χ² {chi2:.3g} on {dof:g} dof, "
+                                       f"p = {p_value:.2g})", detail)
+    return Check("adequacy", False,
+                 f"the final model still does not explain the readings (χ² {chi2:.3g} on {dof:g} dof, p = "
+                 f"{p_value:.2g} < {alpha:g}): the library lacks something, and an accepted cause may stand in "
+                 f"for it", detail)
 
 
 def determined_check(s) -> Check:

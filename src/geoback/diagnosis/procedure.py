@@ -25,11 +25,14 @@
    them; a rival within 2 AIC of the accepted one is reported with the readings that would tell
    them apart; the size of effect each score test could have detected.
    The accepted hypothesis is then tested as a claim (``claims.py``): determined and off its search
-   bounds, predicting each instrument left out better than the model without it, no rival of another
-   family within 10 quasi-AIC, and (after the final joint fit) no structure left in any instrument's
-   residuals. A cause that passes is *named*; one that fails is *explained but not singled out*
-   (``results.GRADES``). The last round's score tests, with no refit left to confirm them, never
-   make the model inadequate: a score test alone is a linear approximation.
+   bounds, predicting each instrument left out better than the model without it, for an error of one
+   instrument explaining the readings alone (every other instrument explained without it, each one
+   left out predicted within its band), no rival of another family within 10 quasi-AIC, and (after
+   the final joint fit) no structure left in any instrument's residuals and a final model that
+   explains the readings. A cause that passes is
+   *named*; one that fails is *explained but not singled out* (``results.GRADES``). The last round's
+   score tests, with no refit left to confirm them, never make the model inadequate: a score test
+   alone is a linear approximation.
 6. Report every accepted parameter from the final joint fit (profile-likelihood intervals where
    the linearised ones are not reliable); a boundary depth accepted before another effect is
    profiled again in the final model.
@@ -404,12 +407,16 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     if accepted:  # what a true cause leaves behind: no structure in any instrument's residuals
         say("claim checks: residual structure after the final joint fit")
         left = claims.residual_structure(current, cur_fit.p, min(alpha, claims.STRUCTURE_ALPHA))
-        for s in accepted:
-            s.checks["residual-structure"] = left
-            s.grade = claims.grade(s.checks)
     say("final joint fit: intervals")
     extended = current.simulation.loaded  # the case with the accepted extensions (a split layer) if any
     final = conclude(current, cur_fit, extended.case, extended.digest(), {}, {}, settings=settings)
+    if accepted:  # ... and a final model that explains the readings (else the library lacks something)
+        rel = final.reliability
+        enough = claims.adequacy(rel.chi2, rel.dof, rel.p_value, min(alpha, claims.STRUCTURE_ALPHA))
+        for s in accepted:
+            s.checks["residual-structure"] = left
+            s.checks["adequacy"] = enough
+            s.grade = claims.grade(s.checks)
     intervals = _open_intervals(final, current, settings, [n for s in accepted for n in s.hypothesis.names])
     return Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
                      time.perf_counter() - t_start, intervals, analysis.loaded, method,
@@ -441,6 +448,10 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, say) -> None:
     say(f"claim checks of {acc.hypothesis.title}: cross-validation across instruments")
     acc.checks["determined"] = claims.determined_check(acc)
     acc.checks["cross-validation"] = claims.cross_validation(current, cur_fit.p, acc.misfit, acc.refit.p)
+    alone = claims.single_instrument(acc.hypothesis.names)
+    if alone is not None:  # an error of one instrument: every other reading explained without it
+        say(f"claim checks of {acc.hypothesis.title}: an error of {alone} alone")
+        acc.checks["instrument-alone"] = claims.instrument_alone(acc.misfit, acc.refit.p, alone)
     acc.rivals = claims.rivals(acc, [s for s in rnd.ranking if s.refit is not None])
     acc.checks["rivals"] = claims.rival_check(acc, acc.rivals)
     if acc.rivals and (rnd.rival is None or rnd.rival.family == acc.family):
