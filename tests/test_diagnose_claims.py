@@ -214,7 +214,7 @@ def test_an_error_of_one_instrument_must_explain_the_readings_alone():
     ext, fe, _ = _instrument_error_refit("bias-shift", "bias-shift[I2]")
     scores = _left_out(ext, fe.p)
     assert scores["I2"][2] == scores["I2"][1] - 1  # I2 left out: its bias is not informed, one dof less
-    assert all(dof == m for k, (_, m, dof) in scores.items() if k != "I2")
+    assert all(dof == m for k, (_, m, dof, _) in scores.items() if k != "I2")
     c = instrument_alone(ext, fe.p, "I2")
     assert c.passed and c.name == "instrument-alone"
     rest = c.detail["tests"]["the other instruments fitted without I2"]
@@ -272,3 +272,44 @@ def test_a_cause_that_leaves_the_model_inadequate_is_not_named():
     assert js["grade"] == "explained but not singled out"
     assert js["missing"][0]["checks"]["adequacy"]["passed"] is False
     assert all(e["ci95"] is None for e in js["missing"][0]["estimates"].values())
+
+
+def _refitted(name: str, key: str):
+    """A concealed case's baseline fit and a Scored refit of hypothesis `key`, judged as diagnose judges it."""
+    from geoback.diagnosis.hypotheses import candidate_hypotheses
+    from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge
+    from geoback.diagnosis.results import Scored
+    from geoback.inference.estimate import fit
+    from geoback.inference.identification import prepare
+
+    a = prepare(load_case(CONCEALED / f"{name}.yaml"))
+    f = fit(a.misfit, a.settings)
+    h = next(h for h in candidate_hypotheses(a.misfit, f.p) if h.key == key)
+    s = Scored(h, 0.0, len(h.parameters), 1.0, misfit=a.misfit.extended(h.parameters, h.extra_values, start=f.p))
+    s.refit, s.reliability = fit_and_assess(s.misfit, a.settings, "lm", REFIT_ITERATIONS)
+    compare(s, f.J, 0)
+    judge(s)
+    return a, f, s
+
+
+def test_a_rival_that_fails_its_own_claim_checks_does_not_block_a_verdict():
+    """Check 3: a rival of another family blocks the verdict only when it passes the checks of its round
+    itself. On the stiffness-gradient case a bias shift of I2 improves the fit, but an error of I2 alone
+    does not explain the readings: dismissed, and said so. On the bias-shift case the same hypothesis
+    (the truth) passes them: a rival that stands."""
+    from geoback.diagnosis.claims import credible, rival_check
+
+    a, f, s = _refitted("stiffness-gradient", "bias-shift[I2]")
+    assert s.settled and s.dJ > 10
+    assert not credible(s, a.misfit, f.p)
+    assert s.checks["cross-validation"].passed and not s.checks["instrument-alone"].passed
+    assert not s.checks["cross-validation"].detail["beyond_linear"]  # a bias is linear in its parameter
+    acc = SimpleNamespace(aic=s.aic - 3.0, reliability=SimpleNamespace(reduced_chi2=1.0, p_value=0.5))
+    c = rival_check(acc, [], [s])
+    assert c.passed and c.detail["dismissed"] == ["bias-shift[I2]"]
+    assert "fails its own claim checks (instrument-alone)" in c.text
+
+    a, f, s = _refitted("bias-shift", "bias-shift[I2]")
+    assert credible(s, a.misfit, f.p) and all(ch.passed for ch in s.checks.values())
+    c = rival_check(acc, [s])
+    assert not c.passed and c.detail["rivals"] == ["bias-shift[I2]"]

@@ -27,9 +27,11 @@ the hypothesis improves the fit but a check fails (results.GRADES).
 3. Rivals of other families (``rivals``): a refit of another family (results.FAMILIES) that improves
    on the model it extends and whose quasi-AIC is within RIVAL_AIC of the accepted one's (the AIC
    difference divided by the overdispersion chi^2/dof the accepted refit leaves, where its chi^2 test
-   fails)
-   explains the readings within the evidence: both are listed with the readings that separate them
-   (compare.separation).
+   fails) and that passes the claim checks it can take in its round itself (determined,
+   cross-validation, for an error of one instrument check 5: ``credible``) explains the readings
+   within the evidence: both are listed with the readings that separate them (compare.separation).
+   A rival that fails its own checks is a surrogate: it is named in the check's words as dismissed,
+   and does not keep the accepted cause from being singled out.
 4. Determined: every extra parameter determined by the readings and off its search bounds.
 5. An instrument alone (``instrument_alone``), for a hypothesis on one instrument only (an error of
    that instrument: its reference end, a bias shift, a depth offset). Check 1 cannot test it: with
@@ -89,10 +91,12 @@ def left_out_scores(misfit: Misfit, p: np.ndarray) -> dict[str, tuple[float, int
     return {k: v[:2] for k, v in _left_out(misfit, p).items()}
 
 
-def _left_out(misfit: Misfit, p: np.ndarray) -> dict[str, tuple[float, int, int]]:
-    """{instrument: (T_i, readings, dof)}: ``left_out_scores`` with the degrees of freedom of T_i under
-    the model (its readings less the directions their band leaves unbounded: the parameters only
-    instrument i informs)."""
+def _left_out(misfit: Misfit, p: np.ndarray) -> dict[str, tuple[float, int, int, float]]:
+    """{instrument: (T_i, readings, dof, bend)}: ``left_out_scores`` with the degrees of freedom of T_i
+    under the model (its readings less the directions their band leaves unbounded: the parameters only
+    instrument i informs) and how far the step without it leaves the model's linear range: bend =
+    ||e - e_lin||^2 / readings, the prediction through the model against the linear one, in noise
+    variances per reading (above 1 the one-step refit is no reliable stand-in for the refit without i)."""
     p = np.asarray(p, float)
     ev = misfit.evaluate(p, jacobian=True)
     r, B = np.asarray(ev.r, float), np.asarray(ev.B, float)
@@ -111,15 +115,17 @@ def _left_out(misfit: Misfit, p: np.ndarray) -> dict[str, tuple[float, int, int]
         inv_band = (V / np.maximum(w, FLOOR * top)) @ V.T  # ... and given an unbounded band
         delta = (inv_step @ ((g - Bi.T @ ri) / d)) / d
         q = np.clip(p + delta, params.lower, params.upper)
+        e_lin = ri - Bi @ (q - p)
         try:
             e = np.asarray(misfit.evaluate(q).r, float)[rows]
         except Exception:  # noqa: BLE001 - the model not solvable there: the linear prediction
-            e = ri - Bi @ (q - p)
+            e = e_lin
+        bend = float((e - e_lin) @ (e - e_lin)) / len(rows) if np.all(np.isfinite(e)) else float("inf")
         Bs = Bi / d
         band = np.eye(len(rows)) + Bs @ inv_band @ Bs.T
         free = Bs @ V[:, ~informed]  # what the uninformed directions do to instrument i's readings
         lost = int(np.linalg.matrix_rank(free, tol=1e-8 * max(np.abs(Bs).max(), 1e-300))) if free.size else 0
-        out[name] = (float(e @ np.linalg.solve(band, e)), len(rows), len(rows) - lost)
+        out[name] = (float(e @ np.linalg.solve(band, e)), len(rows), len(rows) - lost, bend)
     return out
 
 
@@ -127,16 +133,17 @@ def cross_validation(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.nd
     """Check 1: does the extended model predict each instrument's readings, left out, better than
     the model without the hypothesis?"""
     try:
-        tb, te = left_out_scores(base, p_base), left_out_scores(ext, p_ext)
+        tb, te = _left_out(base, p_base), _left_out(ext, p_ext)
     except Exception as exc:  # noqa: BLE001 - a check that cannot run does not pass
         return Check("cross-validation", False, f"the cross-validation could not be computed ({exc})", {"error": True})
     if len(te) < 2:
         return Check("cross-validation", True, "one instrument only: nothing to cross-validate against",
                      {"applicable": False})
     Tb, Te = sum(v[0] for v in tb.values()), sum(v[0] for v in te.values())
-    per = {k: {"without": tb[k][0], "with": te[k][0], "readings": te[k][1]} for k in te}
+    per = {k: {"without": tb[k][0], "with": te[k][0], "readings": te[k][1], "bend": te[k][3]} for k in te}
     worst = max(per, key=lambda k: per[k]["with"] - per[k]["without"])
     passed = bool(Te < Tb)
+    beyond = sorted(k for k in te if te[k][3] >= 1.0)  # its one-step refit without k beyond the linear range
     if passed:
         text = (f"each instrument left out in turn is predicted better with it (sum of scores {Te:.3g} against "
                 f"{Tb:.3g} without it)")
@@ -144,7 +151,8 @@ def cross_validation(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.nd
         text = (f"the instruments left out in turn are not predicted better with it (sum of scores {Te:.3g} against "
                 f"{Tb:.3g} without it; {worst}: {per[worst]['with']:.3g} against {per[worst]['without']:.3g}): it "
                 f"explains the readings only where it is fitted to them")
-    return Check("cross-validation", passed, text, {"with": Te, "without": Tb, "instruments": per})
+    return Check("cross-validation", passed, text, {"with": Te, "without": Tb, "instruments": per,
+                                                    "beyond_linear": beyond})
 
 
 def _runs_z(w: np.ndarray) -> float:
@@ -213,15 +221,43 @@ def rivals(acc, refitted: list, threshold: float = float("nan")) -> list:
                    and np.isfinite(s.aic) and (s.aic - acc.aic) / c < RIVAL_AIC), key=lambda s: s.aic)
 
 
-def rival_check(acc, found: list) -> Check:
+def rival_claims(s, base: Misfit, p_base: np.ndarray) -> dict:
+    """The claim checks a rival can take in its round (determined, cross-validation, and for an error of one
+    instrument ``instrument_alone``), stored in its ``checks``: a rival that fails one of them explains
+    the readings only as a surrogate does and does not keep the accepted cause from being singled out."""
+    if not s.checks:
+        s.checks["determined"] = determined_check(s)
+        s.checks["cross-validation"] = cross_validation(base, p_base, s.misfit, s.refit.p)
+        alone = single_instrument(s.hypothesis.names)
+        if alone is not None:
+            s.checks["instrument-alone"] = instrument_alone(s.misfit, s.refit.p, alone)
+    return s.checks
+
+
+def credible(s, base: Misfit, p_base: np.ndarray) -> bool:
+    """A rival passes every claim check it can take in its round (``rival_claims``). Only a failure that
+    stands dismisses it: a check that could not be computed does not, nor a cross-validation whose
+    one-step refits leave the model's linear range (a stratum far below, a yielding zone: the
+    prediction through the step is then no stand-in for the refit without the instrument)."""
+    return all(c.passed or c.detail.get("error") or c.detail.get("beyond_linear")
+               for c in rival_claims(s, base, p_base).values())
+
+
+def rival_check(acc, found: list, dismissed: list = ()) -> Check:
     c = overdispersion(acc)
     scaled = f" (differences divided by the χ²/dof {c:.3g} its refit leaves)" if c > 1 else ""
+    gone = ""
+    if dismissed:
+        gone = "; " + "; ".join(
+            f"{s.hypothesis.title} (ΔAIC {s.aic - acc.aic:+.2g}) fails its own claim checks ("
+            + ", ".join(k for k, ch in s.checks.items() if not ch.passed) + ")" for s in dismissed)
+    detail = {"overdispersion": c, "dismissed": [s.hypothesis.key for s in dismissed]}
     if not found:
-        return Check("rivals", True, f"no refit of another family comes within {RIVAL_AIC:.3g} AIC{scaled}",
-                     {"overdispersion": c})
+        return Check("rivals", True, f"no refit of another family that passes its own claim checks comes within "
+                                     f"{RIVAL_AIC:.3g} AIC{scaled}{gone}", detail)
     names = "; ".join(f"{s.hypothesis.title} (ΔAIC {s.aic - acc.aic:+.2g})" for s in found) + scaled
-    return Check("rivals", False, f"another family explains the readings within the evidence: {names}",
-                 {"rivals": [s.hypothesis.key for s in found]})
+    return Check("rivals", False, f"another family explains the readings within the evidence: {names}{gone}",
+                 {**detail, "rivals": [s.hypothesis.key for s in found]})
 
 
 def single_instrument(names) -> str | None:
@@ -285,7 +321,7 @@ def instrument_alone(misfit: Misfit, p: np.ndarray, instrument: str, alpha: floa
         return Check("instrument-alone", False, f"the fit without {instrument} could not be computed ({exc})",
                      {"error": True})
     tests = {f"the other instruments fitted without {instrument}": (J, dof)}
-    tests.update({f"{k} left out": (T, n) for k, (T, _, n) in scores.items()})
+    tests.update({f"{k} left out": (T, n) for k, (T, _, n, _) in scores.items()})
     tests = {k: (T, n, float(chi2_sf(T, n))) for k, (T, n) in tests.items() if n > 0}
     if not tests:
         return Check("instrument-alone", True, "no readings to spare to check it against", {"applicable": False})

@@ -27,9 +27,9 @@
    The accepted hypothesis is then tested as a claim (``claims.py``): determined and off its search
    bounds, predicting each instrument left out better than the model without it, for an error of one
    instrument explaining the readings alone (every other instrument explained without it, each one
-   left out predicted within its band), no rival of another family within 10 quasi-AIC, and (after
-   the final joint fit) no structure left in any instrument's residuals and a final model that
-   explains the readings. A cause that passes is
+   left out predicted within its band), no rival of another family within 10 quasi-AIC that passes
+   the checks of its round itself, and (after the final joint fit) no structure left in any
+   instrument's residuals and a final model that explains the readings. A cause that passes is
    *named*; one that fails is *explained but not singled out* (``results.GRADES``). The last round's
    score tests, with no refit left to confirm them, never make the model inadequate: a score test
    alone is a linear approximation.
@@ -452,8 +452,11 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, say) -> None:
     if alone is not None:  # an error of one instrument: every other reading explained without it
         say(f"claim checks of {acc.hypothesis.title}: an error of {alone} alone")
         acc.checks["instrument-alone"] = claims.instrument_alone(acc.misfit, acc.refit.p, alone)
-    acc.rivals = claims.rivals(acc, [s for s in rnd.ranking if s.refit is not None])
-    acc.checks["rivals"] = claims.rival_check(acc, acc.rivals)
+    near = claims.rivals(acc, [s for s in rnd.ranking if s.refit is not None])
+    if near:
+        say(f"claim checks of its rivals: {', '.join(s.hypothesis.title for s in near)}")
+    acc.rivals = [s for s in near if claims.credible(s, current, cur_fit.p)]
+    acc.checks["rivals"] = claims.rival_check(acc, acc.rivals, [s for s in near if s not in acc.rivals])
     if acc.rivals and (rnd.rival is None or rnd.rival.family == acc.family):
         rnd.rival = acc.rivals[0]
         rnd.separation = separation(acc, rnd.rival, current.data)
