@@ -32,7 +32,9 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    within the evidence: both are listed with the readings that separate them (compare.separation).
    A rival that fails its own checks is a surrogate: it is named in the check's words as dismissed,
    and does not keep the accepted cause from being singled out.
-4. Determined: every extra parameter determined by the readings and off its search bounds.
+4. Determined: every extra parameter determined by the readings and off its search bounds, and a
+   layer boundary's depth determined: its profile-likelihood interval closed inside the layer (an
+   interval reaching the layer's top or bottom says the layer differs, not where a stratum begins).
 5. An instrument alone (``instrument_alone``), for a hypothesis on one instrument only (an error of
    that instrument: its reference end, a bias shift, a depth offset). Check 1 cannot test it: with
    the instrument left out its parameter is not informed, and the left-out score drops that share.
@@ -356,6 +358,13 @@ def adequacy(chi2: float, dof: int, p_value: float, alpha: float = STRUCTURE_ALP
 
 
 def determined_check(s) -> Check:
+    prof = getattr(s, "profile", None)
+    if prof is not None and prof.has_interval and (prof.low_open or prof.high_open):
+        return Check("determined", False,
+                     f"the boundary's depth is not determined: its 95 % interval ({prof.interval_text()}) reaches the "
+                     f"layer's {'top' if prof.low_open else 'bottom'}, so the readings say the ground of "
+                     f"'{prof.layer}' differs, not that a stratum begins within it",
+                     {"depth_ci95": [prof.low, prof.high], "open": [prof.low_open, prof.high_open]})
     if s.at_bound:
         which = ", ".join(f"{n} at its {b} search bound" for n, b in s.at_bound.items())
         return Check("determined", False, f"{which}; not determined")
