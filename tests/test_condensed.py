@@ -130,3 +130,20 @@ def test_factorisations_kept_from_run_to_run_analyse_a_pattern_once(tunnel):
         assert _close(again.du_dp, own.du_dp, 1e-10)
         region.release()
         assert region._factors == ()  # freed
+
+
+def test_a_factorisation_dropped_without_release_frees_pardiso_memory():
+    """PARDISO's memory is MKL's: a factorisation kept from run to run and then dropped frees it."""
+    import gc
+
+    from geoback.physics.plasticity.linear import LU, Counters
+
+    n = 50
+    A = (sp.diags([4.0] * n) + sp.diags([-1.0] * (n - 1), 1) + sp.diags([-1.0] * (n - 1), -1)).tocsr()
+    lu = LU(Counters(), "pardiso").factorise(A)
+    assert np.allclose(A @ lu.solve(np.ones(n)), 1.0)
+    freed, free = [], lu._solver.free_memory
+    lu._solver.free_memory = lambda everything=False: (freed.append(everything), free(everything))
+    del lu
+    gc.collect()
+    assert freed == [True]

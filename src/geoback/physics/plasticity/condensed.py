@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from geoback.physics.plasticity.linear import LU, Counters, SingularMatrix
+from geoback.physics.plasticity.linear import LU, Counters, Released, SingularMatrix
 from geoback.physics.solver import point_pypardiso_at_mkl
 
 RINGS = 3  # rings of elements added around the plastic elements when the region grows
@@ -66,7 +66,7 @@ def _pardiso(mtype: int, schur: bool = False):
     return s
 
 
-class _Cholesky:
+class _Cholesky(Released):
     """PARDISO Cholesky (mtype 2) of an SPD matrix given as its upper triangle; solve() back-substitutes."""
 
     def __init__(self, upper: sp.csr_matrix):
@@ -84,12 +84,6 @@ class _Cholesky:
         if self._s is not None:
             self._s.free_memory(everything=True)
             self._s = None
-
-    def __del__(self):  # PARDISO's memory is MKL's, not Python's: freed with the object if not released before
-        try:
-            self.release()
-        except Exception:  # noqa: BLE001 - (at interpreter exit MKL may be gone already)
-            pass
 
 
 def schur_complement(upper: sp.csr_matrix, last: np.ndarray) -> np.ndarray:

@@ -91,7 +91,21 @@ def default_backend(n: int) -> str:
     return "scipy" if n < SMALL else available_backends()[0]
 
 
-class LU:
+class Released:
+    """A factorisation whose memory is PARDISO's (MKL's, not Python's): ``release()`` frees it, and so
+    does dropping the object without it (factorisations kept from run to run, ``condensed.Region``)."""
+
+    def release(self) -> None:  # pragma: no cover - every subclass frees its own
+        pass
+
+    def __del__(self):
+        try:
+            self.release()
+        except Exception:  # noqa: BLE001 - (at interpreter exit MKL may be gone already)
+            pass
+
+
+class LU(Released):
     """LU factorisation of square CSR matrices of one sparsity pattern.
 
     ``factorise(A)`` replaces the factor; with PARDISO the symbolic analysis (ordering, phase
@@ -187,9 +201,4 @@ class LU:
         self._lu = None
         self._pattern = None
 
-    def __del__(self):  # PARDISO's memory is MKL's, not Python's: freed with the object if not released before
-        try:
-            self.release()
-        except Exception:  # noqa: BLE001 - (at interpreter exit MKL may be gone already)
-            pass
 
