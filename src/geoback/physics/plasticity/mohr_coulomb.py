@@ -171,8 +171,9 @@ def principal(sigma: np.ndarray):
     return np.stack([m + r, m - r, zz], axis=1), m, r
 
 
-def _sorted_principal(sigma: np.ndarray):
-    """Principal stresses sorted by real part, s1 >= s2 >= s3, with the permutation used."""
+def _sorted_principal(sigma: np.ndarray, permutation: bool = True):
+    """Principal stresses sorted by real part, s1 >= s2 >= s3, with the permutation used (None when
+    `permutation` is False: only the sorted stresses are wanted)."""
     p, m, r = principal(sigma)
     a, b, z = p[:, 0].real, p[:, 1].real, p[:, 2].real
     if not np.all(a >= b):  # (not finite): the general sort
@@ -180,9 +181,11 @@ def _sorted_principal(sigma: np.ndarray):
         return np.take_along_axis(p, order, axis=1), order, p, r
     # the in-plane pair is ordered (r >= 0): only szz is placed, as the stable descending sort places it
     above, between = z > a, (z <= a) & (z > b)
-    order = np.tile(np.array([0, 1, 2]), (len(p), 1))
-    order[above] = (2, 0, 1)
-    order[between] = (0, 2, 1)
+    order = None
+    if permutation:
+        order = np.tile(np.array([0, 1, 2]), (len(p), 1))
+        order[above] = (2, 0, 1)
+        order[between] = (0, 2, 1)
     s = np.empty_like(p)
     s[:, 0] = np.where(above, p[:, 2], p[:, 0])
     s[:, 1] = np.where(above, p[:, 0], np.where(between, p[:, 2], p[:, 1]))
@@ -197,7 +200,7 @@ def _mohr_coulomb(s: np.ndarray, c, phi):
 
 def yield_functions(sigma: np.ndarray, mat: Material):
     """Mohr-Coulomb F1 and tension T1 (n,) at stresses sigma (n, 4); <= 0 is admissible."""
-    s = _sorted_principal(sigma)[0]
+    s = _sorted_principal(sigma, permutation=False)[0]
     mat = mat.at(len(sigma))
     return _mohr_coulomb(s, mat.c, mat.phi), s[:, 0] - mat.tension
 
@@ -205,7 +208,7 @@ def yield_functions(sigma: np.ndarray, mat: Material):
 def mobilised(sigma: np.ndarray, mat: Material) -> np.ndarray:
     """The fraction of the Mohr-Coulomb strength mobilised at stresses sigma (n, 4): (s1 - s3) over its value
     on the yield surface at the same s1 + s3 (1 at yield; inf where that mean stress leaves no strength)."""
-    s = _sorted_principal(np.real(sigma))[0]
+    s = _sorted_principal(np.real(sigma), permutation=False)[0]
     mat = mat.at(len(sigma))
     q = s[:, 0] - s[:, 2]
     capacity = 2 * np.real(mat.c) * np.cos(np.real(mat.phi)) - (s[:, 0] + s[:, 2]) * np.sin(np.real(mat.phi))
@@ -214,8 +217,12 @@ def mobilised(sigma: np.ndarray, mat: Material) -> np.ndarray:
 
 
 def _scale(s, mat):
-    t = np.where(np.isfinite(mat.tension.real), np.abs(mat.tension.real), 0.0)
-    return np.abs(s.real).max(axis=1) + np.abs(mat.c.real) + t + 1e-300
+    """The stress scale of each point's tolerances, from principal stresses s sorted by real part: max |s| is
+    at one end (|s_1|, |s_3|; a reduction along the short axis costs 20x), plus |c| and a finite tension."""
+    tension = mat.tension.real
+    finite = np.isfinite(tension)
+    t = np.where(finite, np.abs(tension), 0.0) if finite.any() else 0.0
+    return np.maximum(np.abs(s[:, 0].real), np.abs(s[:, 2].real)) + np.abs(mat.c.real) + t + 1e-300
 
 
 def _planes(mat: Material, sel: tuple[int, ...]):
@@ -295,7 +302,7 @@ def select(sigma_trial: np.ndarray, mat: Material) -> np.ndarray:
     """Mode of every point's return (real parts only): ELASTIC, k >= 1 for CANDIDATES[k-1], APEX."""
     sigma_trial = sigma_trial.real
     mat = Material(*(np.asarray(v).real for v in mat.values())).at(len(sigma_trial))
-    s = _sorted_principal(sigma_trial)[0]
+    s = _sorted_principal(sigma_trial, permutation=False)[0]
     f, ft = _mohr_coulomb(s, mat.c, mat.phi), s[:, 0] - mat.tension  # (yield_functions, sorted once)
     tol = YIELD_TOL * _scale(s, mat)
     mode = np.full(len(s), ELASTIC)
@@ -311,7 +318,7 @@ def select(sigma_trial: np.ndarray, mat: Material) -> np.ndarray:
             m_idx = mat.take(idx)
             good = _admissible(_return_to(s[idx], m_idx, sel), s[idx], m_idx)
             mode[idx[good]] = k
-            todo = np.setdiff1d(todo, idx[good], assume_unique=True)
+            todo = todo[mode[todo] == ELASTIC]  # (those not returned yet, in order)
     mode[todo] = APEX
     return mode
 
@@ -375,7 +382,8 @@ def _return(st: np.ndarray, mat: Material, mode: np.ndarray, D: np.ndarray | Non
     if D is None:
         return sigma
     # along the three strain directions, d st = D[:, :, j]; s = p[order], so d out = T[inv, inv] d p
-    inv = np.argsort(order, axis=1)
+    inv = np.empty_like(order)  # the inverse permutation of every row (argsort of a permutation, by scatter)
+    np.put_along_axis(inv, order, np.arange(3)[None, :], axis=1)
     Tp = T[np.arange(k)[:, None, None], inv[:, :, None], inv[:, None, :]]
     dxx, dyy, dzz, dxy = D[:, 0], D[:, 1], D[:, 2], D[:, 3]  # (k, 3)
     dm = 0.5 * (dxx + dyy)
