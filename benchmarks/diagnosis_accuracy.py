@@ -412,10 +412,15 @@ def coverage(d, truth: dict) -> list[dict]:
         return []
     s = d.accepted[0]
     out = []
+    selective = d.selective(s) if hasattr(d, "selective") else {}  # (older code: none)
     for name, v, sd, lo, hi in d.estimates(s):
         if name in truth:
+            sel = selective.get(name)  # allowing for the cause's selection (one-parameter causes), else the usual
+            a, b = (sel.low, sel.high) if sel is not None else (lo, hi)
             out.append({"name": name, "truth": truth[name], "estimate": v, "std": sd, "low": lo, "high": hi,
-                        "covered": bool(lo <= truth[name] <= hi), "tentative": not s.determined})
+                        "covered": bool(lo <= truth[name] <= hi), "tentative": not s.determined,
+                        "low_adjusted": a, "high_adjusted": b, "adjusted": sel is not None,
+                        "covered_adjusted": bool(a <= truth[name] <= b)})
     prof = d.depth_profile(s)
     if prof is not None and f"depth[{prof.layer}]" in truth:
         t = truth[f"depth[{prof.layer}]"]
@@ -600,12 +605,16 @@ def coverage_table(rows: list[dict]) -> tuple[str, list[dict]]:
         if not items:
             continue
         n, k = len(items), sum(c["covered"] for c in items)
-        p = k / n
+        ka = sum(c.get("covered_adjusted", c["covered"]) for c in items)
+        p, pa = k / n, ka / n
         table.append({"kind": kind, "intervals": n, "covered": k, "coverage": p,
-                      "se": math.sqrt(max(p * (1 - p), 1e-12) / n)})
-    lines = ["Coverage of the extra parameters' 95 % intervals (final joint fit), correctly named cases:",
-             "kind                  intervals covered  coverage"]
+                      "se": math.sqrt(max(p * (1 - p), 1e-12) / n), "covered_adjusted": ka, "coverage_adjusted": pa,
+                      "se_adjusted": math.sqrt(max(pa * (1 - pa), 1e-12) / n)})
+    lines = ["Coverage of the extra parameters' 95 % intervals (final joint fit), correctly named cases; 'allowing",
+             "for selection': one-parameter causes' intervals adjusted for their acceptance (diagnosis/selection.py):",
+             "kind                  intervals covered  coverage      allowing for selection"]
     lines += [f"{t['kind']:<22}{t['intervals']:>9}{t['covered']:>8}  {100 * t['coverage']:5.1f} % ± {100 * t['se']:.1f}"
+              f"    {100 * t['coverage_adjusted']:5.1f} % ± {100 * t['se_adjusted']:.1f}"
               for t in table]
     return "\n".join(lines), table
 
