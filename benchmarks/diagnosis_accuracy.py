@@ -125,7 +125,9 @@ FLOOR_ACCURACY, FLOOR_FALSE_ALARMS = 0.90, 0.05
 COLUMNS = ["case", "kind", "parameter", "magnitude", "effect_size", "raw_movement", "named", "correct",
            "cause", "named_cause", "accepted", "tentative", "estimate", "covered", "rival", "round1", "p_before",
            "chi2dof_before", "chi2dof_after", "top_score_kind", "readings", "seconds", "R", "axis_depth", "E", "nu",
-           "K0", "layout", "noise_seed", "grade", "failed_checks", "left_out", "adequate_after", "error"]
+           "K0", "layout", "noise_seed", "grade", "failed_checks", "left_out", "adequate_after", "truth_margin",
+           "error"]
+SINGLED_OUT = 10.0  # AIC: the truth's family ahead of every other family's refit by this much (claims.RIVAL_AIC)
 
 
 def family_of(kind: str) -> str:
@@ -541,6 +543,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         row["round1"] = " ".join(  # the refitted hypotheses of round 1: key, dJ, AIC, converged?
             f"{s.hypothesis.key}:dJ={s.dJ:.4g}:AIC={s.aic:.6g}{'' if s.refit.status == 'converged' else ':NC'}"
             for s in r0.ranking if s.refit is not None)
+        row["truth_margin"] = truth_margin(r0, spec["kind"])
         row["chi2dof_before"] = d.baseline_reliability.reduced_chi2
         row["chi2dof_after"] = d.final_reliability.reduced_chi2
     except Exception as exc:  # one broken case is reported, not fatal
@@ -549,6 +552,22 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         row["named_cause"] = row["named_cause"] or "error"
         row["correct"] = False
     return row
+
+
+def truth_margin(r0, kind: str) -> float:
+    """How far round 1's best refit of the truth's family is ahead of the best refit of every other family,
+    in AIC (positive: ahead; nan: one of them not refitted). Where it is below SINGLED_OUT the readings do
+    not single the truth out from another family (raw AIC of the settled refits: the rival check's quasi-AIC
+    and its rivals' own checks left aside)."""
+    fam = family_of(kind)
+    aic = {}
+    for s in r0.ranking:
+        if s.refit is not None and getattr(s, "settled", True) and math.isfinite(s.aic):
+            f = family_of(s.hypothesis.kind) == fam
+            aic[f] = min(aic.get(f, math.inf), s.aic)
+    if True not in aic or False not in aic:
+        return float("nan")
+    return float(aic[False] - aic[True])
 
 
 # ------------------------------------------------------------------------------------------ output
@@ -703,6 +722,20 @@ def summary(rows: list[dict], seconds: float) -> tuple[str, bool]:
             if sub:
                 out.append(f"    {kind:<22} right {sum(bool(r['correct']) for r in sub)}/{len(sub)}, named right "
                            f"{sum(bool(r['correct']) and r['grade'] == 'named' for r in sub)}/{len(sub)}")
+        margin = [r for r in big if isinstance(r["truth_margin"], float) and math.isfinite(r["truth_margin"])]
+        apart = [r for r in margin if r["truth_margin"] >= SINGLED_OUT]
+        tied = [r for r in margin if r["truth_margin"] < SINGLED_OUT]
+
+        def grades(sub):
+            return (f"named right {sum(bool(r['correct']) and r['grade'] == 'named' for r in sub)}, explained right "
+                    f"{sum(bool(r['correct']) and r['grade'] != 'named' for r in sub)}, a wrong kind named "
+                    f"{sum(not r['correct'] and r['grade'] == 'named' for r in sub)}, of {len(sub)}")
+
+        out.append(f"  what the readings allow (round 1's refits): the truth's family ahead of every other by >= "
+                   f"{SINGLED_OUT:g} AIC in {len(apart)}/{len(margin)} cases ({n - len(margin)} more without "
+                   f"refits of both): {grades(apart)};")
+        out.append(f"    another family within {SINGLED_OUT:g} AIC of it (or ahead) in {len(tied)}: {grades(tied)} "
+                   f"(naming one of a tie would be a guess)")
     acc_r, k_r, n_r = rate(raw)
     out.append(f"correct names, raw movement > {THRESHOLD:g} sigma: {k_r}/{n_r} = {100 * acc_r:.1f} %")
     for lo, hi in ((0, 3), (3, 5), (5, 10), (10, 30), (30, math.inf)):
