@@ -207,13 +207,13 @@ class Diagnosis:
 
     def selective(self, s: Scored) -> dict:
         """name -> selection.SelectiveInterval of an accepted cause with one extra parameter whose
-        likelihood-ratio test is the linear one (not a screened kind, not a searched depth): its 95 %
+        likelihood-ratio test is the linear one (not a screened kind, not one of a searched group): its 95 %
         interval allowing for its acceptance at its round's level (``selection.py``); {} for the others."""
         from geoback.diagnosis.selection import selective_interval
 
         rnd = self.round_of(s)
         if (rnd is None or len(s.hypothesis.parameters) != 1 or s.hypothesis.kind in SCREENED
-                or s.profile is not None or not np.isfinite(rnd.threshold)):
+                or s.hypothesis.group or s.profile is not None or not np.isfinite(rnd.threshold)):
             return {}
         q = s.hypothesis.parameters[0]
         params = self.final.parameters
