@@ -47,21 +47,24 @@ def test_far_above_the_limit_it_is_the_usual_interval_and_symmetric_in_sign():
         mu_interval(0.5 * c, c)
 
 
-def test_parameter_scales_and_log_parameters():
-    """theta = theta0 + sigma mu, for a log-parametrised parameter in log theta (sigma_log = std / estimate)."""
+def test_the_reported_interval_moved_by_the_selection_shift():
+    """A linear model (usual interval theta_hat +- 1.96 sigma, dJ = z^2): theta0 + sigma [mu_lo, mu_hi] exactly;
+    an asymmetric (profile) interval keeps its asymmetry, each end moved in units of its own side."""
     c = critical_value(0.01)
-    got = selective_interval(1.3, 0.1, 1.0, 0.01)
     lo, hi = mu_interval(3.0, c)
+    got = selective_interval(1.3, 1.3 - Q * 0.1, 1.3 + Q * 0.1, 9.0, 1.0, 0.01)
     assert (got.low, got.high) == pytest.approx((1.0 + 0.1 * lo, 1.0 + 0.1 * hi), rel=1e-12)
     assert got.z == pytest.approx(3.0) and got.c == pytest.approx(c) and got.noticeable
-    glog = selective_interval(1.3, 0.13, 1.0, 0.01, log=True)
-    zl = np.log(1.3) / 0.1
-    lo, hi = mu_interval(zl, c)
-    assert (glog.low, glog.high) == pytest.approx((np.exp(0.1 * lo), np.exp(0.1 * hi)), rel=1e-12)
-    far = selective_interval(2.0, 0.1, 1.0, 0.01)
+    below = selective_interval(0.7, 0.7 - Q * 0.1, 0.7 + Q * 0.1, 9.0, 1.0, 0.01)  # the other side of the null
+    assert (below.low, below.high) == pytest.approx((1.0 - 0.1 * hi, 1.0 - 0.1 * lo), rel=1e-12)
+    skew = selective_interval(1.3, 1.3 - Q * 0.1, 1.3 + Q * 0.3, 9.0, 1.0, 0.01)
+    assert skew.low == pytest.approx(got.low, rel=1e-12)
+    assert skew.high == pytest.approx(1.3 + 0.3 * (hi - 3.0), rel=1e-12)
+    far = selective_interval(2.0, 2.0 - Q * 0.1, 2.0 + Q * 0.1, 100.0, 1.0, 0.01)
     assert not far.noticeable and far.low == pytest.approx(2.0 - Q * 0.1, rel=1e-6)
-    assert selective_interval(1.1, 0.1, 1.0, 0.01) is None  # not beyond the limit: it was not selected by it
-    assert selective_interval(1.3, float("nan"), 1.0, 0.01) is None
+    # the statistic, not estimate / std, says how far above the limit it was accepted
+    assert selective_interval(1.3, 1.3 - Q * 0.1, 1.3 + Q * 0.1, 4.0, 1.0, 0.01) is None  # |z| = 2 < c
+    assert selective_interval(1.3, float("nan"), 1.5, 9.0, 1.0, 0.01) is None
 
 
 def test_verdict_and_json_show_it_where_it_differs(tmp_path):
@@ -84,11 +87,11 @@ def test_verdict_and_json_show_it_where_it_differs(tmp_path):
     assert "allowing for its selection" not in _accepted_words(d, s)
 
     z = abs(d.selective(s)["bias[I2]"].z)
+    assert z == pytest.approx(np.sqrt(s.dJ))  # the refit's likelihood ratio, signed
     d.round_of(s).threshold = float(2 * special.ndtr(-(z - 0.3)))  # its limit 0.3 below the statistic
     near = d.selective(s)["bias[I2]"]
     assert near.noticeable and near.c == pytest.approx(z - 0.3)
-    i = d.final.parameters.names.index("bias[I2]")
-    v, sd = d.final_fit.p[i], d.final.reliability.std[i]
-    assert near.low < v - Q * sd and near.high < v + Q * sd  # pulled towards the null value (no shift)
+    (_, v, _, lo, hi), = d.estimates(s)
+    assert near.low < lo and near.high < hi  # pulled towards the null value (no shift)
     words = _accepted_words(d, s)
     assert "allowing for its selection near the detection limit" in words and f"{z:.2f}" in words

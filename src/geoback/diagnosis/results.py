@@ -207,8 +207,9 @@ class Diagnosis:
 
     def selective(self, s: Scored) -> dict:
         """name -> selection.SelectiveInterval of an accepted cause with one extra parameter whose
-        likelihood-ratio test is the linear one (not a screened kind, not one of a searched group): its 95 %
-        interval allowing for its acceptance at its round's level (``selection.py``); {} for the others."""
+        likelihood-ratio test is the regular one (not a screened kind, not one of a searched group): its 95 %
+        interval (final joint fit) allowing for its acceptance on its refit's dJ at its round's level
+        (``selection.py``); {} for the others."""
         from geoback.diagnosis.selection import selective_interval
 
         rnd = self.round_of(s)
@@ -216,13 +217,11 @@ class Diagnosis:
                 or s.hypothesis.group or s.profile is not None or not np.isfinite(rnd.threshold)):
             return {}
         q = s.hypothesis.parameters[0]
-        params = self.final.parameters
-        if q.name not in params.names:
-            return {}
-        i = params.names.index(q.name)
-        got = selective_interval(float(self.final_fit.p[i]), float(self.final.reliability.std[i]), float(q.initial),
-                                 rnd.threshold, bool(params.log[i]))
-        return {q.name: got} if got is not None else {}
+        for name, v, _, lo, hi in self.estimates(s):
+            if name == q.name:
+                got = selective_interval(v, lo, hi, s.dJ, float(q.initial), rnd.threshold)
+                return {name: got} if got is not None else {}
+        return {}
 
     def open_ends(self, name: str) -> tuple[bool, bool]:
         """Whether the 95 % interval of an accepted parameter reaches a limit the readings do not
