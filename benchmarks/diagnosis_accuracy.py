@@ -125,7 +125,9 @@ FLOOR_ACCURACY, FLOOR_FALSE_ALARMS = 0.90, 0.05
 COLUMNS = ["case", "kind", "parameter", "magnitude", "effect_size", "raw_movement", "named", "correct",
            "cause", "named_cause", "accepted", "tentative", "estimate", "covered", "rival", "round1", "p_before",
            "chi2dof_before", "chi2dof_after", "top_score_kind", "readings", "seconds", "R", "axis_depth", "E", "nu",
-           "K0", "layout", "noise_seed", "grade", "failed_checks", "left_out", "adequate_after", "error"]
+           "K0", "layout", "noise_seed", "grade", "failed_checks", "left_out", "adequate_after", "truth_margin",
+           "error"]
+SINGLED_OUT = 10.0  # AIC: the truth's family ahead of every other family's refit by this much (claims.RIVAL_AIC)
 
 
 def family_of(kind: str) -> str:
@@ -412,10 +414,15 @@ def coverage(d, truth: dict) -> list[dict]:
         return []
     s = d.accepted[0]
     out = []
+    selective = d.selective(s) if hasattr(d, "selective") else {}  # (older code: none)
     for name, v, sd, lo, hi in d.estimates(s):
         if name in truth:
+            sel = selective.get(name)  # allowing for the cause's selection (one-parameter causes), else the usual
+            a, b = (sel.low, sel.high) if sel is not None else (lo, hi)
             out.append({"name": name, "truth": truth[name], "estimate": v, "std": sd, "low": lo, "high": hi,
-                        "covered": bool(lo <= truth[name] <= hi), "tentative": not s.determined})
+                        "covered": bool(lo <= truth[name] <= hi), "tentative": not s.determined,
+                        "low_adjusted": a, "high_adjusted": b, "adjusted": sel is not None,
+                        "covered_adjusted": bool(a <= truth[name] <= b)})
     prof = d.depth_profile(s)
     if prof is not None and f"depth[{prof.layer}]" in truth:
         t = truth[f"depth[{prof.layer}]"]
@@ -536,6 +543,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         row["round1"] = " ".join(  # the refitted hypotheses of round 1: key, dJ, AIC, converged?
             f"{s.hypothesis.key}:dJ={s.dJ:.4g}:AIC={s.aic:.6g}{'' if s.refit.status == 'converged' else ':NC'}"
             for s in r0.ranking if s.refit is not None)
+        row["truth_margin"] = truth_margin(r0, spec["kind"])
         row["chi2dof_before"] = d.baseline_reliability.reduced_chi2
         row["chi2dof_after"] = d.final_reliability.reduced_chi2
     except Exception as exc:  # one broken case is reported, not fatal
@@ -544,6 +552,22 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
         row["named_cause"] = row["named_cause"] or "error"
         row["correct"] = False
     return row
+
+
+def truth_margin(r0, kind: str) -> float:
+    """How far round 1's best refit of the truth's family is ahead of the best refit of every other family,
+    in AIC (positive: ahead; nan: one of them not refitted). Where it is below SINGLED_OUT the readings do
+    not single the truth out from another family (raw AIC of the settled refits: the rival check's quasi-AIC
+    and its rivals' own checks left aside)."""
+    fam = family_of(kind)
+    aic = {}
+    for s in r0.ranking:
+        if s.refit is not None and getattr(s, "settled", True) and math.isfinite(s.aic):
+            f = family_of(s.hypothesis.kind) == fam
+            aic[f] = min(aic.get(f, math.inf), s.aic)
+    if True not in aic or False not in aic:
+        return float("nan")
+    return float(aic[False] - aic[True])
 
 
 # ------------------------------------------------------------------------------------------ output
@@ -600,12 +624,16 @@ def coverage_table(rows: list[dict]) -> tuple[str, list[dict]]:
         if not items:
             continue
         n, k = len(items), sum(c["covered"] for c in items)
-        p = k / n
+        ka = sum(c.get("covered_adjusted", c["covered"]) for c in items)
+        p, pa = k / n, ka / n
         table.append({"kind": kind, "intervals": n, "covered": k, "coverage": p,
-                      "se": math.sqrt(max(p * (1 - p), 1e-12) / n)})
-    lines = ["Coverage of the extra parameters' 95 % intervals (final joint fit), correctly named cases:",
-             "kind                  intervals covered  coverage"]
+                      "se": math.sqrt(max(p * (1 - p), 1e-12) / n), "covered_adjusted": ka, "coverage_adjusted": pa,
+                      "se_adjusted": math.sqrt(max(pa * (1 - pa), 1e-12) / n)})
+    lines = ["Coverage of the extra parameters' 95 % intervals (final joint fit), correctly named cases; 'allowing",
+             "for selection': one-parameter causes' intervals adjusted for their acceptance (diagnosis/selection.py):",
+             "kind                  intervals covered  coverage      allowing for selection"]
     lines += [f"{t['kind']:<22}{t['intervals']:>9}{t['covered']:>8}  {100 * t['coverage']:5.1f} % ± {100 * t['se']:.1f}"
+              f"    {100 * t['coverage_adjusted']:5.1f} % ± {100 * t['se_adjusted']:.1f}"
               for t in table]
     return "\n".join(lines), table
 
@@ -694,6 +722,20 @@ def summary(rows: list[dict], seconds: float) -> tuple[str, bool]:
             if sub:
                 out.append(f"    {kind:<22} right {sum(bool(r['correct']) for r in sub)}/{len(sub)}, named right "
                            f"{sum(bool(r['correct']) and r['grade'] == 'named' for r in sub)}/{len(sub)}")
+        margin = [r for r in big if isinstance(r["truth_margin"], float) and math.isfinite(r["truth_margin"])]
+        apart = [r for r in margin if r["truth_margin"] >= SINGLED_OUT]
+        tied = [r for r in margin if r["truth_margin"] < SINGLED_OUT]
+
+        def grades(sub):
+            return (f"named right {sum(bool(r['correct']) and r['grade'] == 'named' for r in sub)}, explained right "
+                    f"{sum(bool(r['correct']) and r['grade'] != 'named' for r in sub)}, a wrong kind named "
+                    f"{sum(not r['correct'] and r['grade'] == 'named' for r in sub)}, of {len(sub)}")
+
+        out.append(f"  what the readings allow (round 1's refits): the truth's family ahead of every other by >= "
+                   f"{SINGLED_OUT:g} AIC in {len(apart)}/{len(margin)} cases ({n - len(margin)} more without "
+                   f"refits of both): {grades(apart)};")
+        out.append(f"    another family within {SINGLED_OUT:g} AIC of it (or ahead) in {len(tied)}: {grades(tied)} "
+                   f"(naming one of a tie would be a guess)")
     acc_r, k_r, n_r = rate(raw)
     out.append(f"correct names, raw movement > {THRESHOLD:g} sigma: {k_r}/{n_r} = {100 * acc_r:.1f} %")
     for lo, hi in ((0, 3), (3, 5), (5, 10), (10, 30), (30, math.inf)):

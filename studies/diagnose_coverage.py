@@ -79,7 +79,8 @@ def intervals(rows: list[dict]) -> list[dict]:
             z = (c["estimate"] - c["truth"]) / (half / 1.959964) if half > 0 and np.isfinite(half) else float("nan")
             out.append({"case": r["case"], "kind": r["kind"], "parameter": c["name"], "truth": c["truth"],
                         "estimate": c["estimate"], "std": c["std"], "low": c["low"], "high": c["high"],
-                        "covered": c["covered"], "standardised_error": z, "effect_size": r["effect_size"],
+                        "covered": c["covered"], "covered_adjusted": c.get("covered_adjusted", c["covered"]),
+                        "adjusted": c.get("adjusted", False), "standardised_error": z, "effect_size": r["effect_size"],
                         "tentative": c["tentative"], "accepted": r["accepted"], "layout": r["layout"],
                         "noise_seed": r["noise_seed"]})
     return out
@@ -88,9 +89,12 @@ def intervals(rows: list[dict]) -> list[dict]:
 def _rate(items: list[dict]) -> dict:
     n = len(items)
     k = sum(bool(i["covered"]) for i in items)
+    ka = sum(bool(i["covered_adjusted"]) for i in items)
     p = k / n if n else float("nan")
+    pa = ka / n if n else float("nan")
     return {"intervals": n, "covered": k, "coverage": p,
-            "se": math.sqrt(max(p * (1 - p), 0.0) / n) if n else float("nan")}
+            "se": math.sqrt(max(p * (1 - p), 0.0) / n) if n else float("nan"),
+            "covered_adjusted": ka, "coverage_adjusted": pa}
 
 
 def summarise(rows: list[dict]) -> list[dict]:
@@ -203,10 +207,11 @@ def main(argv: list[str] | None = None) -> dict:
     figure(rows, table, args.out / f"{NAME}.png")
     seconds = time.perf_counter() - t0
     print(f"\n{len(rows)} cases ({per_kind} per kind, seed {args.seed}) in {seconds:.0f} s")
-    print(f"{'kind':<22}{'band':<13}{'cases':>6}{'named':>6}{'intervals':>10}{'covered':>8}  coverage")
+    print(f"{'kind':<22}{'band':<13}{'cases':>6}{'named':>6}{'intervals':>10}{'covered':>8}  coverage"
+          f"     allowing for selection (diagnosis/selection.py)")
     for t in table:
         print(f"{t['kind']:<22}{t['band']:<13}{t['cases']!s:>6}{t['named']!s:>6}{t['intervals']:>10}{t['covered']:>8}"
-              f"  {100 * t['coverage']:5.1f} % ± {100 * t['se']:.1f}")
+              f"  {100 * t['coverage']:5.1f} % ± {100 * t['se']:.1f}   {100 * t['coverage_adjusted']:5.1f} %")
     errors = [r for r in rows if r["error"]]
     for r in errors:
         print(f"error in {r['case']}: {r['error']}")
@@ -214,7 +219,9 @@ def main(argv: list[str] | None = None) -> dict:
 
 
 def _progress(r: dict, k: int, n: int) -> None:
-    cov = " ".join(f"{c['name']}:{'in' if c['covered'] else 'OUT'}" for c in r.get("coverage") or [])
+    cov = " ".join(f"{c['name']}:{'in' if c['covered'] else 'OUT'}"
+                   + (f"/{'in' if c['covered_adjusted'] else 'OUT'}" if c.get("adjusted") else "")
+                   for c in r.get("coverage") or [])
     eff = r["effect_size"] if isinstance(r["effect_size"], float) else float("nan")
     print(f"[{k:3d}/{n}] {r['case']:<34} effect {eff:7.2f} -> {r['named']:<20} {cov}", flush=True)
 

@@ -201,6 +201,28 @@ class Diagnosis:
             out.append((name, float(self.final_fit.p[i]), float(fin.reliability.std[i]), a, b))
         return out
 
+    def round_of(self, s: Scored) -> Round | None:
+        """The round in which `s` was accepted."""
+        return next((r for r in self.rounds if r.accepted is s), None)
+
+    def selective(self, s: Scored) -> dict:
+        """name -> selection.SelectiveInterval of an accepted cause with one extra parameter whose
+        likelihood-ratio test is the regular one (not a screened kind, not one of a searched group): its 95 %
+        interval (final joint fit) allowing for its acceptance on its refit's dJ at its round's level
+        (``selection.py``); {} for the others."""
+        from geoback.diagnosis.selection import selective_interval
+
+        rnd = self.round_of(s)
+        if (rnd is None or len(s.hypothesis.parameters) != 1 or s.hypothesis.kind in SCREENED
+                or s.hypothesis.group or s.profile is not None or not np.isfinite(rnd.threshold)):
+            return {}
+        q = s.hypothesis.parameters[0]
+        for name, v, _, lo, hi in self.estimates(s):
+            if name == q.name:
+                got = selective_interval(v, lo, hi, s.dJ, float(q.initial), rnd.threshold)
+                return {name: got} if got is not None else {}
+        return {}
+
     def open_ends(self, name: str) -> tuple[bool, bool]:
         """Whether the 95 % interval of an accepted parameter reaches a limit the readings do not
         move it from (a profile-likelihood interval open at that end, or a limit the linearised

@@ -103,8 +103,14 @@ def _accepted_words(d, s) -> str:
                     f"{'its upper limit' if hi_open else value_text(n, unit, hi)}, open where the readings do not bound it")
             return f"{n} = {value_text(n, unit, v)} (95 % {ends})"
         how = ", profile likelihood" if (n in d.final_intervals or n in d.final.profiled) else ""
-        return f"{n} = {pm_text(n, unit, v, sd)} (95 % {interval_text(n, unit, lo, hi)}{how})"
+        sel = selective.get(n)
+        near = ""
+        if sel is not None and sel.noticeable:  # near the detection limit: the interval allowing for it too
+            near = (f"; {interval_text(n, unit, sel.low, sel.high)} allowing for its selection near the detection "
+                    f"limit (accepted as |z| = {abs(sel.z):.2f} exceeded {sel.c:.2f})")
+        return f"{n} = {pm_text(n, unit, v, sd)} (95 % {interval_text(n, unit, lo, hi)}{how}{near})"
 
+    selective = d.selective(s)
     est = "; ".join(one(*e) for e in d.estimates(s))
     prof = d.depth_profile(s)
     title = s.hypothesis.title
@@ -414,7 +420,12 @@ def _item(d, s, final: bool) -> dict:
                 e.update(at_bound=bound, note=BOUND_WORDS)
             elif s.grade == "explained":
                 e["note"] = "explained but not singled out: no interval as if it were found"
+            if shown:  # the interval allowing for the cause's selection at its round's level (selection.py)
+                sel = selective.get(n)
+                e["ci95_selective"] = sel.as_dict() if sel is not None else None
             return e
+
+        selective = d.selective(s)
 
         item["estimates"] = {e[0]: entry(*e) for e in d.estimates(s)}
         item["grade"] = GRADES.get(s.grade, s.grade)
