@@ -74,7 +74,11 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    a stiffness gradient named yielding at 15 sigma (seed 2025, bench-008: 1.8 of a gain of 197 near the
    opening) fails it; every true yielding case, with the full library, passes it (the nearest readings
    carry 7.9 to 97 000 of the gain, the 7.9 of a case of effect size 2.6). Not caught: a weak gradient (seed 2024, bench-026, 6.4 sigma) whose crown readings the zone does
-   improve (20.8 of 29.1). Where the case has stages, a cross-validation by stage was also considered
+   improve (20.8 of 29.1). A yielding *rival* is not dismissed by this check (``rival_claims``): it tests
+   the plastic part of the claim, not whether the refit predicts what it was not fitted to; a yielding
+   refit that fails it still says the readings are explained by ground softer near the opening, and the
+   accepted cause is not singled out from that (measured: dismissing such rivals named a stratum and a
+   modulus gradient for two anisotropic grounds of the leave-out benchmark). Where the case has stages, a cross-validation by stage was also considered
    (plastic strain grows non-linearly with the release, a stratum's effect does not); no case of the
    benchmark has one (yielding is not proposed with a lining on a circular tunnel), so it is not built.
 """
@@ -254,12 +258,11 @@ def rivals(acc, refitted: list, threshold: float = float("nan")) -> list:
 def rival_claims(s, base: Misfit, p_base: np.ndarray) -> dict:
     """The claim checks a rival can take in its round (determined, cross-validation, and for an error of one
     instrument ``instrument_alone``), stored in its ``checks``: a rival that fails one of them explains
-    the readings only as a surrogate does and does not keep the accepted cause from being singled out."""
+    the readings only as a surrogate does and does not keep the accepted cause from being singled out.
+    (Not check 7, ``zone_seen``: see the module docstring.)"""
     if not s.checks:
         s.checks["determined"] = determined_check(s)
         s.checks["cross-validation"] = cross_validation(base, p_base, s.misfit, s.refit.p)
-        if s.hypothesis.kind == "yielding":
-            s.checks["plastic-zone"] = zone_seen(base, p_base, s.misfit, s.refit.p)
         alone = single_instrument(s.hypothesis.names)
         if alone is not None:
             s.checks["instrument-alone"] = instrument_alone(s.misfit, s.refit.p, alone)
@@ -437,17 +440,17 @@ def zone_seen(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarray,
               "needed": need, "p_value": float(chi2_sf(max(gain, 0.0), 1))}
     where = (f"the {n} reading{'s' if n != 1 else ''} within {NEAR_ZONE:g} R_eq of the opening (a plastic zone of "
              f"{R_eq / R:.2f} R equivalent radius)")
+    seen = bool(last.yielded_points) and gain >= need
     if not last.yielded_points:
-        return Check("plastic-zone", False, "no ground yields at the refit's strength: the fit it improves is not a "
-                                            "plastic zone's", detail)
-    if gain >= need:
-        return Check("plastic-zone", True, f"{where} improve by {gain:.3g} of the refit's {total:.3g} (at least "
-                                           f"{need:.3g}, χ²(1) at {alpha:g})", detail)
-    return Check("plastic-zone", False,
-                 f"{where} improve by {gain:.3g} of the refit's {total:.3g} (less than {need:.3g}, χ²(1) at {alpha:g}): "
-                 f"the readings that would see a plastic zone do not show it; the improvement comes from readings "
-                 f"that see only its elastic far field, which ground varying with depth (a stratum, a modulus "
-                 f"gradient) changes as well", detail)
+        text = "no ground yields at the refit's strength: the fit it improves is not a plastic zone's"
+    elif seen:
+        text = f"{where} improve by {gain:.3g} of the refit's {total:.3g} (at least {need:.3g}, χ²(1) at {alpha:g})"
+    else:
+        text = (f"{where} improve by {gain:.3g} of the refit's {total:.3g} (less than {need:.3g}, χ²(1) at {alpha:g}): "
+                f"the readings that would see a plastic zone do not show it; the improvement comes from readings "
+                f"that see only its elastic far field, which ground varying with depth (a stratum, a modulus "
+                f"gradient) changes as well")
+    return Check("plastic-zone", seen, text, detail)
 
 
 def final_determined(s, open_ends) -> Check | None:
