@@ -359,6 +359,27 @@ def test_a_parameter_whose_final_interval_is_open_is_not_determined():
     assert c.detail["open"] == {"c[clay]": [True, False]}
 
 
+def test_a_cause_after_it_that_is_not_named_does_not_take_its_determination():
+    """regrade_final, last cause first: the last cause's open interval fails it; an earlier cause's open interval
+    fails it only while every cause after it is named (seed 2025's bench-040: a true yielding zone whose c'
+    interval opened only beside a K0 gradient accepted after it that fails cross-validation)."""
+    from geoback.diagnosis.claims import Check, regrade_final
+
+    def cause(name, passed=True):
+        return SimpleNamespace(hypothesis=SimpleNamespace(names=[name]), grade="named" if passed else "explained",
+                               checks={"determined": Check("determined", True, ""),
+                                       "cross-validation": Check("cross-validation", passed, "")})
+
+    everything_open = lambda name: (False, True)  # noqa: E731
+    first, second = cause("c[clay]"), cause("K0grad", passed=False)  # the later cause is a surrogate
+    regrade_final([first, second], everything_open)
+    assert first.grade == "named" and first.checks["determined"].passed
+    assert not second.checks["determined"].passed and second.grade == "explained"
+    first, second = cause("c[clay]"), cause("K0grad")
+    regrade_final([first, second], lambda name: (False, name == "c[clay]"))  # the later one named: it counts
+    assert second.grade == "named" and first.grade == "explained" and not first.checks["determined"].passed
+
+
 def _leave_out_problem(bench, tmp_path, seed: int, index: int, kind: str):
     """Case `index` of the leave-one-family-out benchmark (32 concealed cases, upper-half effects), its truth
     on a mesh twice as fine with instrument noise, as run_one builds it (a stratum's truth included)."""

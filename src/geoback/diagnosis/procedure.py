@@ -423,11 +423,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     out = Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
                     time.perf_counter() - t_start, intervals, analysis.loaded, method,
                     not_applicable(analysis.case))
-    for s in accepted:  # check 4 again: an interval of the final joint fit open at a limit is not determined
-        again = claims.final_determined(s, out.open_ends)
-        if again is not None:
-            s.checks["determined"] = again
-            s.grade = claims.grade(s.checks)
+    claims.regrade_final(accepted, out.open_ends)  # check 4 again, on the final joint fit's intervals
     return out
 
 
