@@ -73,6 +73,14 @@ def test_diagnosis_text_says_it(yielding):
     assert "Missing - Ground physics: the ground yields around the tunnel" in text and "| nan" not in text
 
 
+def test_the_strength_of_a_true_plastic_zone_is_determined_in_the_final_fit(yielding):
+    """Check 4 in the final joint fit (claims.final_determined): the readings bound c' of a true plastic
+    zone on both sides, so yielding stays named (a zone standing in for a stratum: test_diagnose_claims)."""
+    s = yielding.accepted[0]
+    assert not any(any(yielding.open_ends(n)) for n in s.hypothesis.names)
+    assert s.checks["determined"].passed and s.grade == "named" and yielding.grade == "named"
+
+
 @pytest.mark.parametrize("name", ["null-1", "null-2", "null-3"])
 def test_null_cases_are_not_called_yielding(name):
     d = diagnose(load_case(CONCEALED / f"{name}.yaml"))

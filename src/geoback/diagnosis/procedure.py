@@ -27,9 +27,11 @@
    The accepted hypothesis is then tested as a claim (``claims.py``): determined and off its search
    bounds, predicting each instrument left out better than the model without it, for an error of one
    instrument explaining the readings alone (every other instrument explained without it, each one
-   left out predicted within its band), no rival of another family within 10 quasi-AIC that passes
-   the checks of its round itself, and (after the final joint fit) no structure left in any
-   instrument's residuals and a final model that explains the readings. A cause that passes is
+   left out predicted within its band), for yielding ground a plastic zone the readings near the
+   opening see (they improve by a significant amount themselves), no rival of another family within
+   10 quasi-AIC that passes the checks of its round itself, and (after the final joint fit) no
+   structure left in any instrument's residuals, a final model that explains the readings, and every
+   extra parameter's 95 % interval there closed by the readings (not at a limit). A cause that passes is
    *named*; one that fails is *explained but not singled out* (``results.GRADES``). The last round's
    score tests, with no refit left to confirm them, never make the model inadequate: a score test
    alone is a linear approximation.
@@ -418,9 +420,11 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             s.checks["adequacy"] = enough
             s.grade = claims.grade(s.checks)
     intervals = _open_intervals(final, current, settings, [n for s in accepted for n in s.hypothesis.names])
-    return Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
-                     time.perf_counter() - t_start, intervals, analysis.loaded, method,
-                     not_applicable(analysis.case))
+    out = Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
+                    time.perf_counter() - t_start, intervals, analysis.loaded, method,
+                    not_applicable(analysis.case))
+    claims.regrade_final(accepted, out.open_ends)  # check 4 again, on the final joint fit's intervals
+    return out
 
 
 def _excluded(exclude) -> frozenset:
@@ -452,6 +456,8 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, say) -> None:
     if alone is not None:  # an error of one instrument: every other reading explained without it
         say(f"claim checks of {acc.hypothesis.title}: an error of {alone} alone")
         acc.checks["instrument-alone"] = claims.instrument_alone(acc.misfit, acc.refit.p, alone)
+    if acc.hypothesis.kind == "yielding":  # the readings that see the plastic zone improve with it
+        acc.checks["plastic-zone"] = claims.zone_seen(current, cur_fit.p, acc.misfit, acc.refit.p)
     near = claims.rivals(acc, [s for s in rnd.ranking if s.refit is not None])
     if near:
         say(f"claim checks of its rivals: {', '.join(s.hypothesis.title for s in near)}")

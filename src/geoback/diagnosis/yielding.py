@@ -86,6 +86,8 @@ def screen(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
     values = misfit.values(p_hat)
     if any(n.startswith("zoff[") for n in misfit.parameters.names) or sim.survey.offsets(values):
         return []  # the elastoplastic simulation does not read inclinometers at depth offsets
+    if any(k.split("[", 1)[0] in ("n", "m") and float(v) != 1.0 for k, v in values.items()):
+        return []  # ... nor cross-anisotropic ground (an anisotropy accepted in an earlier round)
     if openings:
         mesh, near, c_req = _section_screen(sim, values)
     else:
