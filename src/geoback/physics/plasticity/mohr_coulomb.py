@@ -150,7 +150,7 @@ def elastic_matrix(mat: Material) -> np.ndarray:
 
 
 def _elastic_increment(lam, G, deps: np.ndarray) -> np.ndarray:
-    """D deps (n, 4) for Lame constants lam, G."""
+    """D deps (n, 4) for Lame constants lam, G; for deps (n, 3, P) with lam, G of shape (n, 1): (n, 4, P)."""
     exx, eyy, gxy = deps[:, 0], deps[:, 1], deps[:, 2]
     vol = lam * (exx + eyy)
     return np.stack([vol + 2 * G * exx, vol + 2 * G * eyy, vol, G * gxy], axis=1)
@@ -476,6 +476,19 @@ def consistent_tangent(sigma_n: np.ndarray, deps: np.ndarray, mat: Material,
     return C
 
 
+def _stiffness_derivative(mat: Material, d_mat: Material | None, deps: np.ndarray) -> np.ndarray | None:
+    """dD deps (n, 4) along d_mat (a complex step of the Lame constants: exact), or None where d_mat
+    moves neither E nor nu."""
+    if d_mat is None:
+        return None
+    d_mat = d_mat.at(len(deps))
+    if not (np.any(d_mat.E) or np.any(d_mat.nu)):
+        return None
+    h = 1e-30 / max(np.abs(d_mat.E).max(), np.abs(d_mat.nu).max())
+    lam_c, G_c = lame(mat.E + 1j * h * d_mat.E, mat.nu + 1j * h * d_mat.nu)
+    return _elastic_increment(lam_c.imag / h, G_c.imag / h, deps)
+
+
 def directional_derivative(sigma_n: np.ndarray, deps: np.ndarray, mat: Material,
                            d_sigma_n: np.ndarray | None = None, d_deps: np.ndarray | None = None,
                            d_mat: Material | None = None, mode: np.ndarray | None = None) -> np.ndarray:
@@ -493,11 +506,9 @@ def directional_derivative(sigma_n: np.ndarray, deps: np.ndarray, mat: Material,
     lam, G = lame(mat.E, mat.nu)
     if d_deps is not None:
         out += _elastic_increment(lam, G, d_deps)
-    if d_mat is not None and (np.any(d_mat.E) or np.any(d_mat.nu)):
-        size = max(np.abs(d_mat.E).max(), np.abs(d_mat.nu).max())
-        h = 1e-30 / size
-        lam_c, G_c = lame(mat.E + 1j * h * d_mat.E, mat.nu + 1j * h * d_mat.nu)
-        out += _elastic_increment(lam_c.imag / h, G_c.imag / h, deps)
+    dD = _stiffness_derivative(mat, d_mat, deps)
+    if dD is not None:
+        out += dD
     plastic = np.flatnonzero(mode != ELASTIC)
     if len(plastic):
         pick = (lambda a: None if a is None else a[plastic])
@@ -516,17 +527,12 @@ def directional_derivatives(sigma_n: np.ndarray, deps: np.ndarray, mat: Material
     # every point as if elastic (directional_derivative's elastic branch, all directions at once):
     # d sigma_n + D d_deps + dD deps
     lam, G = lame(mat.E, mat.nu)
-    lam, G = lam[:, None], G[:, None]
-    exx, eyy, gxy = d_deps[:, 0], d_deps[:, 1], d_deps[:, 2]  # (n, P)
-    vol = lam * (exx + eyy)
     out = np.array(d_sigma_n, float)
-    out += np.stack([vol + 2 * G * exx, vol + 2 * G * eyy, vol, G * gxy], axis=1)
+    out += _elastic_increment(lam[:, None], G[:, None], d_deps)  # (n, 3, P) -> (n, 4, P)
     for j, d in enumerate(d_mats):
-        if d is not None and (np.any(d.E) or np.any(d.nu)):
-            d = d.at(n)
-            h = 1e-30 / max(np.abs(d.E).max(), np.abs(d.nu).max())
-            lam_c, G_c = lame(mat.E + 1j * h * d.E, mat.nu + 1j * h * d.nu)
-            out[:, :, j] += _elastic_increment(lam_c.imag / h, G_c.imag / h, deps)
+        dD = _stiffness_derivative(mat, d, deps)
+        if dD is not None:
+            out[:, :, j] += dD
     plastic = np.flatnonzero(mode != ELASTIC)
     k = len(plastic)
     if not k:
