@@ -421,35 +421,34 @@ def strength_profile(layer: str, misfit, result, log_std: float, settings, metho
     points, centre, p_centre = [here], here, np.asarray(result.p, float)
 
     def held_fit(phi, psi, prev, p_prev):
-        start = p_prev.copy()  # the unconfined strength kept: c' scaled
+        """The fit with phi' and psi held, from `prev` (its parameters p_prev) with s_c kept; None if unsolvable."""
+        say(f"the strength with phi' = {phi:g} and psi = {psi:g} deg held (c' and the other parameters fitted)")
+        start = p_prev.copy()
         start[ic] = prev.c * float(unconfined_strength(1.0, prev.phi) / unconfined_strength(1.0, phi))
         held = ext.holding(iphi + 1, psi).holding(iphi, phi)
-        f = fit(held, settings, method=method, p0=start)
-        rel = assess(held.evaluate(f.p, jacobian=True), held.parameters, held.logdet)
+        try:
+            f = fit(held, settings, method=method, p0=start)
+            rel = assess(held.evaluate(f.p, jacobian=True), held.parameters, held.logdet)
+        except ForwardFailure as exc:
+            say(f"  not solved there: {exc}")
+            return None
         c = float(f.p[ic])
         return StrengthPoint(phi, psi, float(f.J), c, float(rel.std[ic]) / c), np.asarray(f.p, float)
 
     for psi in PROFILE_PSI:
         if psi != PSI:
-            say(f"the strength with phi' = {PHI:g} and psi = {psi:g} deg held (c' and the other parameters fitted)")
-            try:
-                centre, p_centre = held_fit(PHI, psi, centre, p_centre)
-            except ForwardFailure as exc:
-                say(f"  not solved with psi = {psi:g} deg: {exc}")
+            got = held_fit(PHI, psi, centre, p_centre)
+            if got is None:
                 break
+            centre, p_centre = got
             points.append(centre)
         for angles in ([a for a in reversed(PROFILE_PHI) if a < PHI], [a for a in PROFILE_PHI if a > PHI]):
-            prev, p_prev = centre, p_centre
+            got = (centre, p_centre)
             for phi in angles:
-                if psi > phi:
+                got = held_fit(phi, psi, *got) if psi <= phi else None
+                if got is None:
                     break
-                say(f"the strength with phi' = {phi:g} and psi = {psi:g} deg held")
-                try:
-                    prev, p_prev = held_fit(phi, psi, prev, p_prev)
-                except ForwardFailure as exc:
-                    say(f"  not solved with phi' = {phi:g}, psi = {psi:g} deg: {exc}")
-                    break
-                points.append(prev)
-                if prev.J - centre.J > CHI2_1_95 and prev.J > centre.J:  # farther angles lie outside as well
+                points.append(got[0])
+                if got[0].J - centre.J > CHI2_1_95 and got[0].J > centre.J:  # farther angles lie outside as well
                     break
     return combine(points, layer, time.perf_counter() - t0)
