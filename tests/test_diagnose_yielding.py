@@ -141,6 +141,9 @@ def test_yielding_around_a_heading_and_bench_is_named(tmp_path):
     assert not s.checks["plastic-zone"].detail.get("error")  # located with a convergence chord among the readings
     sp = d.strength[s.hypothesis.key]  # phi' and psi not assumed: the truth (40 kPa, 30 deg, psi = 5 deg) inside
     assert sp.c_low <= 40.0 <= sp.c_high and sp.phi_low <= 30.0 <= sp.phi_high
+    # the assumed psi = 0 leaves misfit the truth's psi = 5 deg removes (J 284 -> 130), and the verdict says so
+    assert sp.best == (30.0, 5.0) and sp.gain > 100
+    assert "the readings favour phi' = 30 and psi = 5 deg over the assumed 30 and 0 deg" in sp.angles_words()
 
 
 def test_a_chord_is_near_where_either_end_is():
@@ -209,6 +212,7 @@ def test_the_strength_with_phi_and_psi_not_assumed_holds_the_truth(yielding, tmp
     assert sp.ucs_low <= float(unconfined_strength(45.0, 28.0)) <= sp.ucs_high
     assert sp.phi_low <= 28.0 <= sp.phi_high and sp.phi_open == (False, False)
     assert {p.psi for p in sp.points} == {0.0, 5.0, 10.0}
+    assert sp.gain < 3.84 and sp.angles_words() == ""  # the assumed angles are within the 95 % region here
     assert "with phi' and psi not assumed: c' 95 %" in diagnosis_text(d)
     write_diagnosis(d, tmp_path / "d", plots=False)
     found = json.loads((tmp_path / "d" / "diagnosis.json").read_text())
