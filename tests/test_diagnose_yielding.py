@@ -144,6 +144,7 @@ def test_yielding_around_a_heading_and_bench_is_named(tmp_path):
     # the assumed psi = 0 leaves misfit the truth's psi = 5 deg removes (J 284 -> 130), and the verdict says so
     assert sp.best == (30.0, 5.0) and sp.gain > 100
     assert "the readings favour phi' = 30 and psi = 5 deg over the assumed 30 and 0 deg" in sp.angles_words()
+    assert sp.interval(0.0, 1e9) == (sp.c_low, sp.c_high)  # ... rejected: the profile's interval alone
 
 
 def test_a_chord_is_near_where_either_end_is():
@@ -208,6 +209,7 @@ def test_the_strength_with_phi_and_psi_not_assumed_holds_the_truth(yielding, tmp
     assert not lo30 <= 45.0 <= hi30
     (name, _, _, lo, hi), = d.estimates(s)
     assert (lo, hi) == (pytest.approx(min(lo30, sp.c_low)), pytest.approx(max(hi30, sp.c_high)))
+    assert sp.interval(lo30, hi30) == (lo, hi)  # the assumed angles inside the 95 % region: the union
     assert lo <= 45.0 <= hi and hi / lo < 1.5  # held, and still a strength determined to about +-15 %
     assert sp.ucs_low <= float(unconfined_strength(45.0, 28.0)) <= sp.ucs_high
     assert sp.phi_low <= 28.0 <= sp.phi_high and sp.phi_open == (False, False)

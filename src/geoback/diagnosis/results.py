@@ -202,8 +202,8 @@ class Diagnosis:
             if prof is not None:
                 a2, b2 = prof.modulus_interval(name, (a, b))
                 a, b = min(a, a2), max(b, b2)
-            if strength is not None and name == f"c[{strength.layer}]":  # phi' profiled out, not assumed
-                a, b = min(a, strength.c_low), max(b, strength.c_high)
+            if strength is not None and name == f"c[{strength.layer}]":  # phi' and psi profiled out, not assumed
+                a, b = strength.interval(a, b)
             out.append((name, float(self.final_fit.p[i]), float(fin.reliability.std[i]), a, b))
         return out
 

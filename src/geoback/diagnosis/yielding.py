@@ -322,13 +322,23 @@ class StrengthProfile:
         """How much lower J is at the best angles of the grid than at the assumed ones."""
         return self.assumed_J - min(p.J for p in self.points)
 
+    def interval(self, low: float, high: float) -> tuple[float, float]:
+        """c' 95 % with phi' and psi profiled out, from the interval (low, high) at the assumed angles: their
+        union where the assumed angles lie inside the 95 % region (its slice there is part of it), else the
+        profile's alone (the assumed angles' interval is then relative to a J the readings reject)."""
+        if self.gain > CHI2_1_95:
+            return self.c_low, self.c_high
+        return min(low, self.c_low), max(high, self.c_high)
+
     def angles_words(self) -> str:
         """What the readings say of the assumed angles: '' where they are within the 95 % region."""
         if self.gain <= CHI2_1_95:
             return ""
+        here = next(p.c for p in self.points if (p.phi, p.psi) == (PHI, PSI))
         return (f"the readings favour phi' = {self.best[0]:g} and psi = {self.best[1]:g} deg over the assumed {PHI:g} "
                 f"and {PSI:g} deg (J lower by {self.gain:.4g}, more than the 3.84 of a 95 % interval): the model with the "
-                f"assumed angles leaves misfit that other angles remove")
+                f"assumed angles leaves misfit that other angles remove, and its c' = {here:.4g} kPa is the strength "
+                f"at angles the readings reject")
 
     def words(self) -> str:
         (lo, hi), (q0, q1) = (PROFILE_PHI[0], PROFILE_PHI[-1]), self.psi_grid
