@@ -57,7 +57,9 @@ size > 3 named as instrument error.
 
 Coverage: for a correctly named case, whether the 95 % interval of each of its extra parameters
 (final joint fit, as the verdict reports it) holds the truth: Egrad, E[clay_below] and the
-boundary's depth (profile likelihood), n, K0grad, B[I1], beta, bias[I1], zoff[I1].
+boundary's depth (profile likelihood), n, K0grad, B[I1], beta, bias[I1], zoff[I1], and for yielding
+c' and the unconfined strength 2c' cos phi' / (1 - sin phi') with phi' and psi profiled out (the truth's
+phi' and psi are drawn, the refit assumes 30 and 0 deg).
 
     python benchmarks/diagnosis_accuracy.py [--concealed 60] [--null 30] [--staged 0] [--yielding 0]
         [--seed 2024 | --seeds 2024 2025 ...] [--workers 2] [--out benchmarks/out/diagnosis_accuracy.csv]
@@ -405,6 +407,11 @@ def plastic_cohesion(p0: float, phi: float, ratio: float) -> float:
     return sc * (1 - sp) / (2 * math.cos(math.radians(phi)))
 
 
+def unconfined(c: float, phi: float) -> float:
+    """The unconfined strength 2 c cos phi / (1 - sin phi) [kPa] of c [kPa], phi [deg]."""
+    return 2 * c * math.cos(math.radians(phi)) / (1 - math.sin(math.radians(phi)))
+
+
 def random_yielding_case(index: int, master_seed: int, draw: int = 0) -> dict:
     """A random tunnel as random_case draws it (K0 redrawn in (0.8, 1.2), a coarser mesh: the truth
     is non-linear), its ground in truth Mohr-Coulomb: phi' uniform in (22, 35) degrees, psi' in (0, 5),
@@ -424,7 +431,8 @@ def random_yielding_case(index: int, master_seed: int, draw: int = 0) -> dict:
     c = plastic_cohesion(p0, phi, ratio)
     spec.update(kind="yielding", K0=K0, parameter=f"c' (phi {phi:.0f}, Rp/R {ratio:.2f})", magnitude=c,
                 strength={"model": "mohr-coulomb", "c": round(c, 3), "phi": round(phi, 3), "psi": round(psi, 3)},
-                truth={}, seed=master_seed, draw=draw)
+                truth={"c[clay]": round(c, 3), "ucs[clay]": unconfined(round(c, 3), round(phi, 3))},
+                seed=master_seed, draw=draw)
     return spec
 
 
@@ -444,6 +452,12 @@ def coverage(d, truth: dict) -> list[dict]:
                         "covered": bool(lo <= truth[name] <= hi), "tentative": not s.determined,
                         "low_adjusted": a, "high_adjusted": b, "adjusted": sel is not None,
                         "covered_adjusted": bool(a <= truth[name] <= b)})
+    strength = getattr(d, "strength", {}).get(s.hypothesis.key)  # yielding: phi' and psi profiled out
+    if strength is not None and f"ucs[{strength.layer}]" in truth:
+        t = truth[f"ucs[{strength.layer}]"]
+        out.append({"name": f"ucs[{strength.layer}]", "truth": t, "estimate": float("nan"), "std": float("nan"),
+                    "low": strength.ucs_low, "high": strength.ucs_high,
+                    "covered": bool(strength.ucs_low <= t <= strength.ucs_high), "tentative": not s.determined})
     prof = d.depth_profile(s)
     if prof is not None and f"depth[{prof.layer}]" in truth:
         t = truth[f"depth[{prof.layer}]"]

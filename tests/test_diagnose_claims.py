@@ -423,6 +423,31 @@ def test_a_true_yielding_zone_passes_the_checks_a_surrogate_fails(bench, tmp_pat
     assert zone.passed and zone.detail["near_gain"] > 50 * zone.detail["needed"]  # 482: the crown anchors
     assert 1.2 < zone.detail["equivalent_radius_over_R"] < 1.6
     assert acc.grade == "named"
+    # the strength with phi' and psi not assumed (yielding.strength_profile) holds the truth's c' and s_c
+    sp = d.strength[acc.hypothesis.key]
+    truth = spec["truth"]
+    assert sp.c_low <= truth["c[clay]"] <= sp.c_high and sp.ucs_low <= truth["ucs[clay]"] <= sp.ucs_high
+
+
+def test_a_release_before_the_lining_is_predicted_stage_by_stage(bench, tmp_path, monkeypatch):
+    """Cross-validation across stages (check 1 by stage): the full library's bench-035 of seed 2024, a
+    two-stage lined tunnel whose truth releases 0.75 before the lining (23 sigma). The release named
+    predicts the readings of each stage, left out, from the other's better than the model without it."""
+    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
+    from geoback.diagnosis.claims import _stage_rows, stages_of
+
+    spec = bench.random_staged_case(35, "release-before-lining", 2024)
+    problem = bench.truth_readings(spec, str(tmp_path))[2]
+    rows = _stage_rows(problem.misfit.data)
+    assert set(rows) == {st["name"] for st in spec["data"]["construction"]["stages"]}
+    assert sorted(np.concatenate(list(rows.values())).tolist()) == list(range(problem.misfit.data.m))
+    assert stages_of(problem.misfit) == 2
+    d = diagnose(problem)
+    acc = d.accepted[0]
+    assert acc.hypothesis.kind == "release-before-lining" and acc.grade == "named"
+    stage = acc.checks["stage-cross-validation"]
+    assert stage.passed and set(stage.detail["stages"]) == set(rows)
+    assert stage.detail["with"] < stage.detail["without"]
 
 
 def test_a_yielding_zone_the_near_readings_do_not_see_is_not_named(bench, tmp_path, monkeypatch):

@@ -138,3 +138,86 @@ def test_yielding_around_a_heading_and_bench_is_named(tmp_path):
     assert s.p_lr < 1e-10 and s.dJ > 1000
     c = d.final_fit.p[d.final.parameters.names.index("c[marl]")]
     assert 30.0 < c < 55.0
+    assert not s.checks["plastic-zone"].detail.get("error")  # located with a convergence chord among the readings
+    sp = d.strength[s.hypothesis.key]  # phi' and psi not assumed: the truth (40 kPa, 30 deg, psi = 5 deg) inside
+    assert sp.c_low <= 40.0 <= sp.c_high and sp.phi_low <= 30.0 <= sp.phi_high
+    # the assumed psi = 0 leaves misfit the truth's psi = 5 deg removes (J 284 -> 130), and the verdict says so
+    assert sp.best == (30.0, 5.0) and sp.gain > 100
+    assert "the readings favour phi' = 30 and psi = 5 deg over the assumed 30 and 0 deg" in sp.angles_words()
+    assert sp.interval(0.0, 1e9) == (sp.c_low, sp.c_high)  # ... rejected: the profile's interval alone
+
+
+def test_a_chord_is_near_where_either_end_is():
+    """claims.readings_near: a linewise instrument's readings at their stations, a convergence chord's
+    (two points, one reading) near when either end is, each point's reading where the point is."""
+    from geoback.diagnosis.claims import readings_near
+
+    analysis = prepare(load_case(CASES / "plastic-heading-bench.yaml"))
+    blocks = {b.name: b for b in analysis.misfit.data.blocks}
+    chord, line, pts = blocks["C1"], blocks["I1"], blocks["S"]  # C1 from (0, -11) to (4, -15)
+    assert readings_near(chord, (0.0, -11.0), 0.5).tolist() == [True]
+    assert readings_near(chord, (4.0, -15.0), 0.5).tolist() == [True]
+    assert readings_near(chord, (2.0, -13.0), 0.5).tolist() == [False]
+    got = readings_near(line, (6.0, -27.0), 0.1)
+    assert got.shape == (line.m,) and got.sum() == 1 and line.stations[got][0].tolist() == [6.0, -27.0]
+    got = readings_near(pts, (3.0, 0.0), 0.1)
+    assert got.shape == (pts.m,) and got.sum() == sum(1 for lab in pts.labels if (lab.x, lab.y) == (3.0, 0.0))
+
+
+def test_the_strength_profile_is_the_profile_likelihood_of_an_exactly_quadratic_objective():
+    """yielding.combine against a closed form: J(c', phi') = J0 + ((phi' - phi0) / a)^2 + ((ln c' - al - be
+    phi') / s)^2 has, with phi' profiled out, the 95 % interval ln c' = al + be phi0 +- 1.96 sqrt(be^2 a^2 +
+    s^2) and phi' = phi0 +- 1.96 a. Fitted at the grid's angles (J and its std exactly as a fit with phi'
+    held gives them: the minimum over c' is J0 + ((phi' - phi0) / a)^2, ln c' on the line, std s)."""
+    from geoback.diagnosis.yielding import PROFILE_PHI, StrengthPoint, combine, unconfined_strength
+
+    J0, phi0, a, al, be, s = 40.0, 27.3, 2.5, 6.0, -0.035, 0.02
+    pts = [StrengthPoint(phi, 0.0, J0 + ((phi - phi0) / a) ** 2, math.exp(al + be * phi), s) for phi in PROFILE_PHI]
+    got = combine(pts, "clay")
+    half = 1.959964 * math.hypot(be * a, s)
+    assert math.log(got.c_low) == pytest.approx(al + be * phi0 - half, abs=2e-3)
+    assert math.log(got.c_high) == pytest.approx(al + be * phi0 + half, abs=2e-3)
+    assert got.phi_low == pytest.approx(phi0 - 1.959964 * a, abs=FINE_STEP)
+    assert got.phi_high == pytest.approx(phi0 + 1.959964 * a, abs=FINE_STEP)
+    assert got.phi_open == (False, False) and got.best == (25.0, 0.0)
+    # the unconfined strength over the same region: its ends lie inside the c' ends' strengths at the angles
+    phis = np.linspace(got.phi_low, got.phi_high, 50)
+    assert unconfined_strength(got.c_low, phis).min() - 1e-9 <= got.ucs_low < got.ucs_high
+    assert got.ucs_high <= unconfined_strength(got.c_high, phis).max() + 1e-9
+    # a flat objective: phi' not bounded, open at both ends, c' over the whole grid's range
+    flat = combine([StrengthPoint(p.phi, 0.0, J0, p.c, s) for p in pts], "clay")
+    assert flat.phi_open == (True, True) and flat.c_low == pytest.approx(math.exp(al + be * 40.0 - 1.959964 * s))
+
+
+FINE_STEP = 0.25  # yielding.FINE: the interpolation step in phi'
+
+
+def test_the_strength_with_phi_and_psi_not_assumed_holds_the_truth(yielding, tmp_path):
+    """The shipped case's truth (c' = 45 kPa, phi' = 28, psi = 5 deg) lies outside the c' interval at the
+    assumed phi' = 30 and psi = 0 deg (39.9 +- 0.4 kPa, issue 24: intervals that never held the truth),
+    inside the one with phi' and psi profiled out, as do its unconfined strength and phi'; the verdict and
+    diagnosis.json say so."""
+    import json
+
+    from geoback.diagnosis.yielding import unconfined_strength
+    from geoback.reports.diagnosis_report import diagnosis_text, write_diagnosis
+
+    d = yielding
+    s = d.accepted[0]
+    sp = d.strength[s.hypothesis.key]
+    lo30, hi30 = (float(v[list(d.final.parameters.names).index("c[clay]")]) for v in d.final.intervals95())
+    assert not lo30 <= 45.0 <= hi30
+    (name, _, _, lo, hi), = d.estimates(s)
+    assert (lo, hi) == (pytest.approx(min(lo30, sp.c_low)), pytest.approx(max(hi30, sp.c_high)))
+    assert sp.interval(lo30, hi30) == (lo, hi)  # the assumed angles inside the 95 % region: the union
+    assert lo <= 45.0 <= hi and hi / lo < 1.5  # held, and still a strength determined to about +-15 %
+    assert sp.ucs_low <= float(unconfined_strength(45.0, 28.0)) <= sp.ucs_high
+    assert sp.phi_low <= 28.0 <= sp.phi_high and sp.phi_open == (False, False)
+    assert {p.psi for p in sp.points} == {0.0, 5.0, 10.0}
+    assert sp.gain < 3.84 and sp.angles_words() == ""  # the assumed angles are within the 95 % region here
+    assert "with phi' and psi not assumed: c' 95 %" in diagnosis_text(d)
+    write_diagnosis(d, tmp_path / "d", plots=False)
+    found = json.loads((tmp_path / "d" / "diagnosis.json").read_text())
+    (acc,) = found["missing"]
+    assert acc["strength"]["ci95_c_kPa"] == pytest.approx([sp.c_low, sp.c_high])
+    assert acc["estimates"]["c[clay]"]["ci95"] == pytest.approx([lo, hi])

@@ -420,10 +420,33 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             s.checks["adequacy"] = enough
             s.grade = claims.grade(s.checks)
     intervals = _open_intervals(final, current, settings, [n for s in accepted for n in s.hypothesis.names])
+    strength = _strength_profiles(accepted, final, current, cur_fit, settings, method, say)
     out = Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
                     time.perf_counter() - t_start, intervals, analysis.loaded, method,
-                    not_applicable(analysis.case))
+                    not_applicable(analysis.case), strength)
     claims.regrade_final(accepted, out.open_ends)  # check 4 again, on the final joint fit's intervals
+    return out
+
+
+def _strength_profiles(accepted: list, final: Identification, misfit: Misfit, result: Fit, settings: Settings,
+                       method: str, say) -> dict:
+    """key -> yielding.StrengthProfile of every accepted yielding cause whose phi' was assumed: its strength
+    in the final joint fit with phi' profiled out (step 3 of yielding.py's docstring)."""
+    out = {}
+    for s in accepted:
+        if s.hypothesis.kind != "yielding":
+            continue
+        layer = s.hypothesis.key[len("yielding["):-1]
+        name = f"c[{layer}]"
+        if name not in final.parameters.names:
+            continue
+        i = list(final.parameters.names).index(name)
+        say(f"the strength of '{layer}' with phi' not assumed: the final joint fit with phi' held at "
+            f"{', '.join(f'{a:g}' for a in yielding.PROFILE_PHI)} deg")
+        got = yielding.strength_profile(layer, misfit, result, float(final.reliability.std[i]) / float(result.p[i]),
+                                        settings, method, say)
+        if got is not None:
+            out[s.hypothesis.key] = got
     return out
 
 
@@ -452,6 +475,10 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, say) -> None:
     say(f"claim checks of {acc.hypothesis.title}: cross-validation across instruments")
     acc.checks["determined"] = claims.determined_check(acc)
     acc.checks["cross-validation"] = claims.cross_validation(current, cur_fit.p, acc.misfit, acc.refit.p)
+    if claims.stages_of(current) > 1:  # ... and each stage's readings left out, predicted from the others
+        say(f"claim checks of {acc.hypothesis.title}: cross-validation across stages")
+        acc.checks["stage-cross-validation"] = claims.cross_validation(current, cur_fit.p, acc.misfit, acc.refit.p,
+                                                                       "stage")
     alone = claims.single_instrument(acc.hypothesis.names)
     if alone is not None:  # an error of one instrument: every other reading explained without it
         say(f"claim checks of {acc.hypothesis.title}: an error of {alone} alone")

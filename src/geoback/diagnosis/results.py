@@ -154,6 +154,8 @@ class Diagnosis:
     loaded: object = None  # the LoadedCase diagnosed (for the amended case: its file, its readings files)
     method: str = "lm"  # the estimation method of every fit
     not_applicable: list = field(default_factory=list)  # (kind, why) of the catalogue's rows this model cannot take
+    strength: dict = field(default_factory=dict)  # key -> yielding.StrengthProfile: an accepted yielding cause's
+    # strength with phi' profiled out (its c' interval is the estimates' one)
 
     @property
     def baseline_fit(self) -> Fit:
@@ -182,11 +184,13 @@ class Diagnosis:
     def estimates(self, s: Scored) -> list[tuple[str, float, float, float, float]]:
         """(name, estimate, std, 95 % low, 95 % high) of an accepted hypothesis' parameters from the
         FINAL joint fit (profile-likelihood intervals where the linearised ones are unreliable; a
-        profiled boundary's modulus with its depth profiled out too)."""
+        profiled boundary's modulus with its depth profiled out too; a yielding layer's c' with its
+        phi' profiled out too: ``strength``)."""
         fin = self.final
         lo, hi = fin.intervals95()
         names = list(fin.parameters.names)
         prof = self.depth_profile(s)
+        strength = self.strength.get(s.hypothesis.key)
         out = []
         for name in s.hypothesis.names:
             if name not in names:
@@ -198,6 +202,8 @@ class Diagnosis:
             if prof is not None:
                 a2, b2 = prof.modulus_interval(name, (a, b))
                 a, b = min(a, a2), max(b, b2)
+            if strength is not None and name == f"c[{strength.layer}]":  # phi' and psi profiled out, not assumed
+                a, b = strength.interval(a, b)
             out.append((name, float(self.final_fit.p[i]), float(fin.reliability.std[i]), a, b))
         return out
 

@@ -103,6 +103,8 @@ def _accepted_words(d, s) -> str:
                     f"{'its upper limit' if hi_open else value_text(n, unit, hi)}, open where the readings do not bound it")
             return f"{n} = {value_text(n, unit, v)} (95 % {ends})"
         how = ", profile likelihood" if (n in d.final_intervals or n in d.final.profiled) else ""
+        if strength is not None and n == f"c[{strength.layer}]":
+            how = ", profile likelihood with phi' and psi not assumed"
         sel = selective.get(n)
         near = ""
         if sel is not None and sel.noticeable:  # near the detection limit: the interval allowing for it too
@@ -111,6 +113,7 @@ def _accepted_words(d, s) -> str:
         return f"{n} = {pm_text(n, unit, v, sd)} (95 % {interval_text(n, unit, lo, hi)}{how}{near})"
 
     selective = d.selective(s)
+    strength = d.strength.get(s.hypothesis.key)  # a yielding layer's strength with phi' and psi profiled out
     est = "; ".join(one(*e) for e in d.estimates(s))
     prof = d.depth_profile(s)
     title = s.hypothesis.title
@@ -121,6 +124,10 @@ def _accepted_words(d, s) -> str:
     elif s.hypothesis.extra_values and s.hypothesis.kind not in ("layer-boundary", "supported-release"):
         title += " at " + ", ".join(f"{k} = {v:g} m" for k, v in s.hypothesis.extra_values.items())
     text = f"{title}: {est}"
+    if strength is not None and s.grade != "explained":
+        text += f"; {strength.words()}"
+    elif strength is not None and strength.angles_words():  # not singled out: no interval, what the angles say
+        text += f"; {strength.angles_words()}"
     if s.grade == "explained":
         why = "; ".join(w for w in (_check_words(s), _rival_words(d, s)) if w)
         text = f"{title} - EXPLAINED BUT NOT SINGLED OUT ({why}): {est}"
@@ -437,6 +444,8 @@ def _item(d, s, final: bool) -> dict:
             item["depth"] = prof.as_dict()
             item["depth"]["from"] = ("final joint fit" if s.hypothesis.key in d.final_profiles
                                      else "profiled in its round (the last effect accepted)")
+        if s.hypothesis.key in d.strength:
+            item["strength"] = d.strength[s.hypothesis.key].as_dict()
         item["tentative"] = not s.determined
     return item
 
