@@ -130,7 +130,8 @@ def test_yielding_around_a_heading_and_bench_is_named(tmp_path):
     readings come from yielding marl), the screen proposes yielding from the stresses of every stage,
     and the refit with the section's yielding simulation is accepted first. Measured: E 18.7 -> 36.8
     MPa, K0 0.79 -> 0.91 (truth 40 MPa, 0.9), c' = 41.6 +- 0.2 kPa with phi' = 30 deg and psi = 0
-    assumed (truth 40 kPa, 30 deg, psi = 5 deg)."""
+    assumed (truth 40 kPa, 30 deg, psi = 5 deg); with psi = 5 deg, which the readings favour and the
+    model then takes, c' = 40.2 +- 0.26 kPa and chi^2 130 on 108 dof (p = 0.074)."""
     d = diagnose(_elastic_heading_bench(tmp_path), max_rounds=1)
     assert not d.adequate_before
     assert d.accepted and d.accepted[0].hypothesis.kind == "yielding"
@@ -141,10 +142,17 @@ def test_yielding_around_a_heading_and_bench_is_named(tmp_path):
     assert not s.checks["plastic-zone"].detail.get("error")  # located with a convergence chord among the readings
     sp = d.strength[s.hypothesis.key]  # phi' and psi not assumed: the truth (40 kPa, 30 deg, psi = 5 deg) inside
     assert sp.c_low <= 40.0 <= sp.c_high and sp.phi_low <= 30.0 <= sp.phi_high
-    # the assumed psi = 0 leaves misfit the truth's psi = 5 deg removes (J 284 -> 130), and the verdict says so
-    assert sp.best == (30.0, 5.0) and sp.gain > 100
-    assert "the readings favour phi' = 30 and psi = 5 deg over the assumed 30 and 0 deg" in sp.angles_words()
-    assert sp.interval(0.0, 1e9) == (sp.c_low, sp.c_high)  # ... rejected: the profile's interval alone
+    # the assumed psi = 0 leaves misfit the truth's psi = 5 deg removes (J 284 -> 130): the model takes the
+    # angles the readings favour (yielding.adopt), its final fit passes its chi^2 test, and the verdict says so
+    assert sp.best == (30.0, 5.0) and sp.adopted and sp.assumed == (30.0, 5.0)
+    assert sp.J_of(30.0, 0.0) - sp.assumed_J > 100 and sp.gain == 0.0
+    assert "the final model takes phi' = 30 and psi = 5 deg, the angles the readings favour" in sp.angles_words()
+    values = d.final_misfit.values(d.final_fit.p)
+    assert (values["phi[marl]"], values["psi[marl]"]) == (30.0, 5.0)
+    assert d.final_reliability.p_value > 0.01 and d.adequate_after and s.grade == "named"
+    from geoback.reports.diagnosis_report import diagnosis_text
+
+    assert "(Mohr-Coulomb, phi' = 30 deg and psi = 5 deg, the angles the readings favour)" in diagnosis_text(d)
 
 
 def test_a_chord_is_near_where_either_end_is():
@@ -187,6 +195,12 @@ def test_the_strength_profile_is_the_profile_likelihood_of_an_exactly_quadratic_
     # a flat objective: phi' not bounded, open at both ends, c' over the whole grid's range
     flat = combine([StrengthPoint(p.phi, 0.0, J0, p.c, s) for p in pts], "clay")
     assert flat.phi_open == (True, True) and flat.c_low == pytest.approx(math.exp(al + be * 40.0 - 1.959964 * s))
+    # the interval at the assumed angles joins the profile's while they lie inside the 95 % region, and is
+    # dropped where the readings reject them (J there above J_min + 3.84)
+    assert got.gain < 3.84 and got.interval(1.0, 1e9) == (1.0, 1e9)
+    far = combine(pts[:2] + [StrengthPoint(30.0, 0.0, J0 + 20.0, pts[2].c, s)] + pts[3:], "clay")
+    assert far.gain > 3.84 and far.interval(1.0, 1e9) == (far.c_low, far.c_high) and far.angles_words()
+    assert not far.adopted and far.to_adopt == (far.gain > 9.21)
 
 
 FINE_STEP = 0.25  # yielding.FINE: the interpolation step in phi'

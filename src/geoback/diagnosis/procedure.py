@@ -330,6 +330,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     current, cur_fit, cur_rel = base, base_fit, baseline.reliability
     rounds: list[Round] = []
     accepted: list[Scored] = []
+    strength: dict = {}  # key -> yielding.StrengthProfile of an accepted yielding cause
     for k in range(max_rounds + 1):
         mismatches = locate(current, cur_fit, cur_rel, alpha)
         tested, scale_level = scale_tests(cur_rel, alpha)
@@ -394,6 +395,9 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         _claim_checks(rnd, current, cur_fit, say)
         accepted.append(rnd.accepted)
         current, cur_fit, cur_rel = rnd.accepted.misfit, rnd.accepted.refit, rnd.accepted.reliability
+        if rnd.accepted.hypothesis.kind == "yielding":  # its strength without the angles assumed (yielding.py)
+            current, cur_fit, cur_rel = _yielding_strength(rnd.accepted, current, cur_fit, cur_rel, strength,
+                                                           settings, method, say)
     final_profiles = {}
     for j, s in enumerate(accepted):  # a boundary accepted before other effects: its depth in the final model
         if s.profile is not None and j < len(accepted) - 1:
@@ -406,6 +410,11 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     if accepted:  # the refits stop at REFIT_ITERATIONS or when J stalls: the final model fitted as `run` fits it
         say("final joint fit")
         cur_fit = fit(current, settings, method=method, p0=cur_fit.p)
+    for j, s in enumerate(accepted):  # a yielding layer's strength again in the final model where its round's
+        if s.hypothesis.kind == "yielding" and (j < len(accepted) - 1 or s.hypothesis.key not in strength):
+            again = _strength_profile(s, current, cur_fit, settings, method, say)  # model was not the final one
+            if again is not None:
+                strength[s.hypothesis.key] = again
     if accepted:  # what a true cause leaves behind: no structure in any instrument's residuals
         say("claim checks: residual structure after the final joint fit")
         left = claims.residual_structure(current, cur_fit.p, min(alpha, claims.STRUCTURE_ALPHA))
@@ -420,7 +429,6 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
             s.checks["adequacy"] = enough
             s.grade = claims.grade(s.checks)
     intervals = _open_intervals(final, current, settings, [n for s in accepted for n in s.hypothesis.names])
-    strength = _strength_profiles(accepted, final, current, cur_fit, settings, method, say)
     out = Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
                     time.perf_counter() - t_start, intervals, analysis.loaded, method,
                     not_applicable(analysis.case), strength)
@@ -428,26 +436,28 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     return out
 
 
-def _strength_profiles(accepted: list, final: Identification, misfit: Misfit, result: Fit, settings: Settings,
-                       method: str, say) -> dict:
-    """key -> yielding.StrengthProfile of every accepted yielding cause whose phi' was assumed: its strength
-    in the final joint fit with phi' profiled out (step 3 of yielding.py's docstring)."""
-    out = {}
-    for s in accepted:
-        if s.hypothesis.kind != "yielding":
-            continue
-        layer = s.hypothesis.key[len("yielding["):-1]
-        name = f"c[{layer}]"
-        if name not in final.parameters.names:
-            continue
-        i = list(final.parameters.names).index(name)
-        say(f"the strength of '{layer}' with phi' not assumed: the final joint fit with phi' held at "
-            f"{', '.join(f'{a:g}' for a in yielding.PROFILE_PHI)} deg")
-        got = yielding.strength_profile(layer, misfit, result, float(final.reliability.std[i]) / float(result.p[i]),
-                                        settings, method, say)
+def _strength_profile(s: Scored, misfit: Misfit, result: Fit, settings: Settings, method: str, say):
+    """An accepted yielding cause's strength with phi' and psi profiled out (step 3 of yielding.py's
+    docstring), on the model `misfit` fitted at `result`; None where its angles are parameters."""
+    layer = s.hypothesis.key[len("yielding["):-1]
+    say(f"the strength of '{layer}' with phi' and psi not assumed: the fit with them held at the points of a grid")
+    return yielding.strength_profile(layer, misfit, result, settings, method, say)
+
+
+def _yielding_strength(s: Scored, current: Misfit, cur_fit: Fit, cur_rel, strength: dict, settings: Settings,
+                       method: str, say) -> tuple:
+    """The round's model after an accepted yielding cause: its strength profiled (kept in `strength`) and, where
+    the grid's best angles fit much better than the assumed ones, the model with them (yielding.adopt, step 4)."""
+    prof = _strength_profile(s, current, cur_fit, settings, method, say)
+    if prof is None:
+        return current, cur_fit, cur_rel
+    if prof.to_adopt:
+        got = yielding.adopt(prof, current, settings, method, say)
         if got is not None:
-            out[s.hypothesis.key] = got
-    return out
+            current, cur_fit, prof = got
+            cur_rel = conclude(current, cur_fit, None, "", {}, {}).reliability
+    strength[s.hypothesis.key] = prof
+    return current, cur_fit, cur_rel
 
 
 def _excluded(exclude) -> frozenset:

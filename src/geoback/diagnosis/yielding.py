@@ -41,7 +41,14 @@ so it cannot rank the hypothesis. Yielding is therefore tested as a likelihood r
    off by -18 to +64 % with +-5 % intervals; cases/concealed/yielding.yaml, c' = 45 kPa with phi' = 28
    and psi = 5 deg: c' 39.9 +- 0.4 kPa at 30 and 0 deg). The same for s_c and for phi' itself; an end
    of phi' still inside at the last angle fitted is open (the readings do not bound it there).
-4. The likelihood-ratio test dJ ~ chi^2(1) (chi^2(2) with phi' freed) as for the other refits, in
+4. Where the grid's best angles lower J by more than ADOPT (chi^2_2 at 1 %: two angles chosen, and a
+   change of the model must be a strong finding) the model takes them (``adopt``), in the round that
+   accepts yielding: its fit again with the layer's phi' and psi set in its case, so that the next
+   rounds, the final joint fit, its intervals, the adequacy check and the amended case are those of the
+   angles the readings favour (measured: the heading-and-bench section, truth psi = 5 deg, J 284 with
+   psi = 0 assumed and 130 at psi = 5: its final model then passes its chi^2 test, p = 0.074). Where
+   other causes are accepted after it, the profile is made again in the final model.
+5. The likelihood-ratio test dJ ~ chi^2(1) (chi^2(2) with phi' freed) as for the other refits, in
    the same Bonferroni family.
    The null (c' at or above c_crit, every point elastic) lies on the boundary of the parameter
    space, where the statistic is a 50:50 mixture of 0 and chi^2(1): the chi^2(1) reference is
@@ -57,7 +64,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -211,13 +218,24 @@ def _stalled(s: Scored) -> bool:
 
 def _mohr_coulomb_misfit(h, current, cur_fit, c0: float, specs: list, start: np.ndarray):
     """The current model with the hypothesis' layer made mohr-coulomb (c0, PHI, PSI), `specs` identified."""
+    layer = h.key[len("yielding["):-1]
+    return _with_layer(current, layer, {"model": "mohr-coulomb", "c": c0, "phi": PHI, "psi": PSI}, specs, start)
+
+
+def with_angles(misfit, layer: str, phi: float, psi: float, start: np.ndarray):
+    """The same model and parameters with the layer's phi' and psi set in its case (the amended case
+    carries them), started from `start`."""
+    return _with_layer(misfit, layer, {"phi": float(phi), "psi": float(psi)}, [], start)
+
+
+def _with_layer(current, layer: str, update: dict, specs: list, start: np.ndarray):
+    """`current` on the same mesh with the fields `update` of `layer` changed in its case (its simulation
+    made yielding), `specs` identified too."""
     from geoback.physics.plastic import PlasticSimulation
 
     sim = current.simulation
     loaded = sim.loaded
-    layer = h.key[len("yielding["):-1]
-    layers = [ly.model_copy(update={"model": "mohr-coulomb", "c": c0, "phi": PHI, "psi": PSI})
-              if ly.name == layer else ly for ly in loaded.case.ground.layers]
+    layers = [ly.model_copy(update=update) if ly.name == layer else ly for ly in loaded.case.ground.layers]
     case = loaded.case.model_copy(update={"ground": loaded.case.ground.model_copy(update={"layers": layers})})
     if hasattr(case.geometry, "openings"):  # yielding ground with openings (the factory's row for it)
         from geoback.physics.factory import make_simulation
@@ -227,7 +245,9 @@ def _mohr_coulomb_misfit(h, current, cur_fit, c0: float, specs: list, start: np.
     else:
         plastic = PlasticSimulation(loaded.with_case(case), mesh=sim.mesh, blocks=list(current.data.blocks),
                                     backend=getattr(sim, "backend", None), extensions=EXTENSIONS)
-    return current.extended(specs, simulation=plastic, start=start)
+    values = {f"{k}[{layer}]": v for k, v in update.items() if k in ("c", "phi", "psi")
+              and f"{k}[{layer}]" in current.base_values}  # a fixed value of the model as the case now says
+    return current.extended(specs, values, simulation=plastic, start=start)
 
 
 def _fit_from(h, current, cur_fit, settings, method, say, c0: float) -> Scored | None:
@@ -271,6 +291,8 @@ PROFILE_PSI = (0.0, 5.0, 10.0)  # degrees: psi held at each: from no volume chan
 # dense sands (psi ~ phi' - 30 deg); a tunnel's readings hardly tell psi, and c' moves with it (measured on
 # cases/concealed/yielding.yaml: c' 42.8 kPa at psi = 0 and 44.3 at psi = 5 with phi' = 28 deg, J 55.1 and 52.6)
 CHI2_1_95 = 3.841458820694124  # chi^2_1 at 95 % (inference.profile.CHI2_1_95, without loading scipy.optimize)
+ADOPT = 9.210340371976182  # chi^2_2 at 1 %: the grid's best angles lower J by more than this -> the final model
+# takes them (two angles chosen; at the structure checks' level, a change of the model must be a strong finding)
 FINE = 0.25  # degrees: the step at which J(phi') is interpolated between the grid's angles
 
 
@@ -287,6 +309,7 @@ class StrengthPoint:
     J: float  # the fit's objective there
     c: float  # kPa, c' fitted there
     log_std: float  # linearised std of ln c' there
+    p: tuple = ()  # the fit's parameters there (the final model's order)
 
 
 @dataclass(frozen=True)
@@ -304,6 +327,7 @@ class StrengthProfile:
     phi_open: tuple  # (low end open, high end open): J still within 3.84 at the last angle fitted there
     best: tuple  # (phi, psi) of the lowest J
     seconds: float
+    assumed: tuple = (PHI, PSI)  # the angles of the final model: PHI, PSI, or those adopted (ADOPT)
 
     @property
     def phi_grid(self) -> tuple:
@@ -315,12 +339,24 @@ class StrengthProfile:
 
     @property
     def assumed_J(self) -> float:
-        return next(p.J for p in self.points if (p.phi, p.psi) == (PHI, PSI))
+        return next(p.J for p in self.points if (p.phi, p.psi) == self.assumed)
+
+    @property
+    def adopted(self) -> bool:
+        return self.assumed != (PHI, PSI)
+
+    @property
+    def to_adopt(self) -> bool:
+        """The grid's best angles fit the readings better than the assumed ones by more than ADOPT."""
+        return not self.adopted and self.gain > ADOPT
 
     @property
     def gain(self) -> float:
         """How much lower J is at the best angles of the grid than at the assumed ones."""
         return self.assumed_J - min(p.J for p in self.points)
+
+    def J_of(self, phi: float, psi: float) -> float:
+        return next(p.J for p in self.points if (p.phi, p.psi) == (phi, psi))
 
     def interval(self, low: float, high: float) -> tuple[float, float]:
         """c' 95 % with phi' and psi profiled out, from the interval (low, high) at the assumed angles: their
@@ -332,6 +368,11 @@ class StrengthProfile:
 
     def angles_words(self) -> str:
         """What the readings say of the assumed angles: '' where they are within the 95 % region."""
+        if self.adopted:
+            (phi, psi), rejected = self.assumed, self.J_of(PHI, PSI) - self.assumed_J
+            return (f"the final model takes phi' = {phi:g} and psi = {psi:g} deg, the angles the readings favour: "
+                    f"with the assumed {PHI:g} and {PSI:g} deg J was higher by {rejected:.4g} (more than the "
+                    f"{ADOPT:.3g} of chi^2 with 2 degrees of freedom at 1 %)")
         if self.gain <= CHI2_1_95:
             return ""
         here = next(p.c for p in self.points if (p.phi, p.psi) == (PHI, PSI))
@@ -358,7 +399,8 @@ class StrengthProfile:
                 "ci95_c_kPa": [self.c_low, self.c_high], "ci95_unconfined_strength_kPa": [self.ucs_low, self.ucs_high],
                 "ci95_phi_deg": [self.phi_low, self.phi_high], "ci95_phi_open": list(self.phi_open),
                 "best_phi_psi_deg": list(self.best), "J_lower_at_best_than_assumed": self.gain,
-                "assumed_angles_rejected": self.gain > CHI2_1_95,
+                "assumed_angles_rejected": self.gain > CHI2_1_95 or self.adopted,
+                "final_model_phi_psi_deg": list(self.assumed), "adopted": self.adopted,
                 "points": [{"phi_deg": p.phi, "psi_deg": p.psi, "J": p.J, "c_kPa": p.c, "c_log_std": p.log_std}
                            for p in self.points],
                 "seconds": self.seconds,
@@ -410,11 +452,12 @@ def combine(points, layer: str, seconds: float = 0.0) -> StrengthProfile:
                            float(allowed.max()), (open_lo, open_hi), (best.phi, best.psi), seconds)
 
 
-def strength_profile(layer: str, misfit, result, log_std: float, settings, method: str, say) -> StrengthProfile | None:
-    """Step 3 of the module docstring on the final joint fit (`misfit`, its Fit `result`; phi' = PHI and
-    psi = PSI in the case, c[layer] a parameter, the std of ln c' `log_std`); None where phi' or psi is a
-    parameter already or the fit did not converge. Per psi, outwards from PHI in each direction, each fit
-    started from its neighbour's optimum (the first of a psi from PHI at the previous psi) with s_c kept."""
+def strength_profile(layer: str, misfit, result, settings, method: str, say) -> StrengthProfile | None:
+    """Step 3 of the module docstring on a fitted model (`misfit`, its Fit `result`; the layer's phi' and
+    psi fixed in its case, at PHI and PSI or at angles adopted from the grid; c[layer] a parameter); None
+    where phi' or psi is a parameter or the fit did not converge. Per psi, outwards from PHI in each
+    direction, each fit started from its neighbour's optimum (the first of a psi from PHI at the previous
+    psi) with s_c kept."""
     from geoback.inference.estimate import fit
     from geoback.inference.reliability import assess
 
@@ -427,7 +470,11 @@ def strength_profile(layer: str, misfit, result, log_std: float, settings, metho
     ext = misfit.extended([Parameter(name=f"phi[{layer}]", initial=PHI, bounds=PHI_RANGE),
                            Parameter(name=f"psi[{layer}]", initial=PSI, bounds=(0.0, PHI_RANGE[1]))], start=result.p)
     iphi = list(ext.parameters.names).index(f"phi[{layer}]")
-    here = StrengthPoint(PHI, PSI, float(result.J), float(result.p[ic]), float(log_std))
+    rel = assess(misfit.evaluate(result.p, jacobian=True), misfit.parameters, misfit.logdet)
+    values = misfit.values(result.p)
+    model_angles = (float(values[f"phi[{layer}]"]), float(values[f"psi[{layer}]"]))
+    here = StrengthPoint(*model_angles, float(result.J), float(result.p[ic]), float(rel.std[ic]) / float(result.p[ic]),
+                         tuple(map(float, result.p)))
     points, centre, p_centre = [here], here, np.asarray(result.p, float)
 
     def held_fit(phi, psi, prev, p_prev):
@@ -443,10 +490,11 @@ def strength_profile(layer: str, misfit, result, log_std: float, settings, metho
             say(f"  not solved there: {exc}")
             return None
         c = float(f.p[ic])
-        return StrengthPoint(phi, psi, float(f.J), c, float(rel.std[ic]) / c), np.asarray(f.p, float)
+        return StrengthPoint(phi, psi, float(f.J), c, float(rel.std[ic]) / c, tuple(map(float, f.p))), \
+            np.asarray(f.p, float)
 
     for psi in PROFILE_PSI:
-        if psi != PSI:
+        if (PHI, psi) != model_angles:
             got = held_fit(PHI, psi, centre, p_centre)
             if got is None:
                 break
@@ -461,4 +509,32 @@ def strength_profile(layer: str, misfit, result, log_std: float, settings, metho
                 points.append(got[0])
                 if got[0].J - centre.J > CHI2_1_95 and got[0].J > centre.J:  # farther angles lie outside as well
                     break
-    return combine(points, layer, time.perf_counter() - t0)
+    return replace(combine(points, layer, time.perf_counter() - t0), assumed=model_angles)
+
+
+def adopt(profile: StrengthProfile, misfit, settings, method: str, say):
+    """Step 4 of the module docstring: (the model with the angles the readings favour, its Fit, the profile
+    with them as its model's), or None where it cannot be solved or does not fit better than the assumed
+    angles by more than ADOPT."""
+    from geoback.inference.estimate import fit
+
+    best = next(q for q in profile.points if (q.phi, q.psi) == profile.best)
+    say(f"the final model with phi' = {best.phi:g} and psi = {best.psi:g} deg, the angles the readings favour")
+    try:
+        m = with_angles(misfit, profile.layer, best.phi, best.psi, np.asarray(best.p, float))
+        f = fit(m, settings, method=method, p0=np.asarray(best.p, float))
+    except ForwardFailure as exc:
+        say(f"  not solved: {exc}")
+        return None
+    if f.status != "converged" or not f.J < profile.assumed_J - ADOPT:
+        return None
+    return m, f, replace(profile, assumed=profile.best)
+
+
+def adopted_title(title: str, profile: StrengthProfile | None) -> str:
+    """A yielding cause's title with the angles its final model takes."""
+    if profile is None or not profile.adopted:
+        return title
+    phi, psi = profile.assumed
+    return title.replace(f"phi' = {PHI:g} deg and psi = {PSI:g} deg assumed",
+                         f"phi' = {phi:g} deg and psi = {psi:g} deg, the angles the readings favour")

@@ -14,6 +14,7 @@ from geoback.diagnosis.procedure import NO_ADDITION
 from geoback.diagnosis.results import GRADES
 from geoback.units import display, interval_text, pm_text, value_text
 from geoback.diagnosis.amend import AMENDED, amended_text
+from geoback.diagnosis.yielding import adopted_title
 
 
 def _fit_line(chi2: float, dof: float, p: float) -> str:
@@ -116,7 +117,7 @@ def _accepted_words(d, s) -> str:
     strength = d.strength.get(s.hypothesis.key)  # a yielding layer's strength with phi' and psi profiled out
     est = "; ".join(one(*e) for e in d.estimates(s))
     prof = d.depth_profile(s)
-    title = s.hypothesis.title
+    title = adopted_title(s.hypothesis.title, strength)
     if prof is not None and s.grade == "explained":
         title = f"a different stratum in '{prof.layer}' below about {prof.z_hat:.3g} m"
     elif prof is not None:
