@@ -235,3 +235,44 @@ def test_the_strength_with_phi_and_psi_not_assumed_holds_the_truth(yielding, tmp
     (acc,) = found["missing"]
     assert acc["strength"]["ci95_c_kPa"] == pytest.approx([sp.c_low, sp.c_high])
     assert acc["estimates"]["c[clay]"]["ci95"] == pytest.approx([lo, hi])
+
+
+def test_the_strength_profile_about_adopted_angles_is_the_same_profile(yielding):
+    """A model whose angles were taken from the grid off its centre (phi' = 25, psi = 5 deg: a yielding cause
+    accepted, its angles adopted, then other causes: the profile made again in the final model) is profiled
+    over the same grid: each point fitted once (its own angles are its fit; seed 2027 bench-020 of the
+    leave-out benchmark raised on a point fitted twice), and J at every point as from the assumed angles."""
+    from geoback.diagnosis.yielding import strength_profile, with_angles
+    from geoback.inference.estimate import Settings
+
+    d = yielding
+    s = d.accepted[0]
+    first = d.strength[s.hypothesis.key]
+    m = with_angles(d.final_misfit, "clay", 25.0, 5.0, d.final_fit.p)
+    f = fit(m, Settings(), p0=np.asarray(next(p.p for p in first.points if (p.phi, p.psi) == (25.0, 5.0))))
+    again = strength_profile("clay", m, f, Settings(), "lm", lambda *_: None)
+    keys = [(p.phi, p.psi) for p in again.points]
+    assert len(keys) == len(set(keys)) and again.assumed == (25.0, 5.0) and again.adopted
+    for p in again.points:
+        if (p.phi, p.psi) in {(q.phi, q.psi) for q in first.points}:
+            assert p.J == pytest.approx(first.J_of(p.phi, p.psi), rel=1e-3, abs=0.05)
+    assert again.c_low == pytest.approx(first.c_low, rel=0.02) and again.c_high == pytest.approx(first.c_high, rel=0.02)
+
+
+def test_a_cause_not_singled_out_says_the_angles_it_took_without_an_interval(yielding):
+    """An explained-but-not-singled-out yielding cause whose model took other angles: its line names the
+    angles and what the assumed ones lost, and gives no strength interval (none is shown as if found)."""
+    import copy
+    from dataclasses import replace
+
+    from geoback.diagnosis.yielding import combine, StrengthPoint
+    from geoback.reports.diagnosis_report import diagnosis_text
+
+    d = copy.copy(yielding)
+    s = copy.copy(d.accepted[0])
+    s.grade = "explained"
+    pts = [StrengthPoint(phi, 0.0, 50.0 + 3 * abs(phi - 35.0), 40.0, 0.01) for phi in (25.0, 30.0, 35.0)]
+    d.accepted, d.strength = [s], {s.hypothesis.key: replace(combine(pts, "clay"), assumed=(35.0, 0.0))}
+    line = next(x for x in diagnosis_text(d).splitlines() if "EXPLAINED BUT NOT SINGLED OUT" in x)
+    assert "phi' = 35 deg and psi = 0 deg, the angles the readings favour" in line
+    assert "the final model takes phi' = 35 and psi = 0 deg" in line and "c' 95 %" not in line

@@ -475,10 +475,13 @@ def strength_profile(layer: str, misfit, result, settings, method: str, say) -> 
     model_angles = (float(values[f"phi[{layer}]"]), float(values[f"psi[{layer}]"]))
     here = StrengthPoint(*model_angles, float(result.J), float(result.p[ic]), float(rel.std[ic]) / float(result.p[ic]),
                          tuple(map(float, result.p)))
-    points, centre, p_centre = [here], here, np.asarray(result.p, float)
+    centre, p_centre = here, np.asarray(result.p, float)
+    done = {model_angles: (here, p_centre)}  # each point of the grid fitted once (the model's own angles: the fit)
 
     def held_fit(phi, psi, prev, p_prev):
         """The fit with phi' and psi held, from `prev` (its parameters p_prev) with s_c kept; None if unsolvable."""
+        if (phi, psi) in done:
+            return done[(phi, psi)]
         say(f"the strength with phi' = {phi:g} and psi = {psi:g} deg held (c' and the other parameters fitted)")
         start = p_prev.copy()
         start[ic] = prev.c * float(unconfined_strength(1.0, prev.phi) / unconfined_strength(1.0, phi))
@@ -490,26 +493,24 @@ def strength_profile(layer: str, misfit, result, settings, method: str, say) -> 
             say(f"  not solved there: {exc}")
             return None
         c = float(f.p[ic])
-        return StrengthPoint(phi, psi, float(f.J), c, float(rel.std[ic]) / c, tuple(map(float, f.p))), \
-            np.asarray(f.p, float)
+        done[(phi, psi)] = (StrengthPoint(phi, psi, float(f.J), c, float(rel.std[ic]) / c, tuple(map(float, f.p))),
+                            np.asarray(f.p, float))
+        return done[(phi, psi)]
 
     for psi in PROFILE_PSI:
-        if (PHI, psi) != model_angles:
-            got = held_fit(PHI, psi, centre, p_centre)
-            if got is None:
-                break
-            centre, p_centre = got
-            points.append(centre)
+        got = held_fit(PHI, psi, centre, p_centre)
+        if got is None:
+            break
+        centre, p_centre = got
         for angles in ([a for a in reversed(PROFILE_PHI) if a < PHI], [a for a in PROFILE_PHI if a > PHI]):
             got = (centre, p_centre)
             for phi in angles:
                 got = held_fit(phi, psi, *got) if psi <= phi else None
                 if got is None:
                     break
-                points.append(got[0])
                 if got[0].J - centre.J > CHI2_1_95 and got[0].J > centre.J:  # farther angles lie outside as well
                     break
-    return replace(combine(points, layer, time.perf_counter() - t0), assumed=model_angles)
+    return replace(combine([q for q, _ in done.values()], layer, time.perf_counter() - t0), assumed=model_angles)
 
 
 def adopt(profile: StrengthProfile, misfit, settings, method: str, say):

@@ -125,13 +125,13 @@ def _accepted_words(d, s) -> str:
     elif s.hypothesis.extra_values and s.hypothesis.kind not in ("layer-boundary", "supported-release"):
         title += " at " + ", ".join(f"{k} = {v:g} m" for k, v in s.hypothesis.extra_values.items())
     text = f"{title}: {est}"
+    if s.grade == "explained":
+        why = "; ".join(w for w in (_check_words(s), _rival_words(d, s)) if w)
+        text = f"{title} - EXPLAINED BUT NOT SINGLED OUT ({why}): {est}"
     if strength is not None and s.grade != "explained":
         text += f"; {strength.words()}"
     elif strength is not None and strength.angles_words():  # not singled out: no interval, what the angles say
         text += f"; {strength.angles_words()}"
-    if s.grade == "explained":
-        why = "; ".join(w for w in (_check_words(s), _rival_words(d, s)) if w)
-        text = f"{title} - EXPLAINED BUT NOT SINGLED OUT ({why}): {est}"
     if not s.determined:
         why = sorted({"it ended at a bound of its search" if c.code == "at-bound" else "its uncertainty is as large "
                       "as the value itself" for c in s.caveats})
