@@ -191,6 +191,15 @@ def stages_of(misfit: Misfit) -> int:
     return len(_stage_rows(misfit.data))
 
 
+def cross_validations(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarray) -> dict:
+    """Check 1 across instruments and, where the readings were taken after several stages, across stages:
+    {check name: Check}."""
+    out = {"cross-validation": cross_validation(base, p_base, ext, p_ext)}
+    if stages_of(base) > 1:
+        out["stage-cross-validation"] = cross_validation(base, p_base, ext, p_ext, "stage")
+    return out
+
+
 def cross_validation(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarray,
                      by: str = "instrument") -> Check:
     """Check 1: does the extended model predict each instrument's readings (by 'stage': each construction
@@ -293,9 +302,7 @@ def rival_claims(s, base: Misfit, p_base: np.ndarray) -> dict:
     (Not check 7, ``zone_seen``: see the module docstring.)"""
     if not s.checks:
         s.checks["determined"] = determined_check(s)
-        s.checks["cross-validation"] = cross_validation(base, p_base, s.misfit, s.refit.p)
-        if stages_of(base) > 1:
-            s.checks["stage-cross-validation"] = cross_validation(base, p_base, s.misfit, s.refit.p, "stage")
+        s.checks.update(cross_validations(base, p_base, s.misfit, s.refit.p))
         alone = single_instrument(s.hypothesis.names)
         if alone is not None:
             s.checks["instrument-alone"] = instrument_alone(s.misfit, s.refit.p, alone)

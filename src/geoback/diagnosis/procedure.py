@@ -482,13 +482,10 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, say) -> None:
     family within the evidence (listed with the readings that separate them). Residual structure is
     tested after the final joint fit; the grade is given then."""
     acc = rnd.accepted
-    say(f"claim checks of {acc.hypothesis.title}: cross-validation across instruments")
+    say(f"claim checks of {acc.hypothesis.title}: cross-validation across instruments"
+        + (" and stages" if claims.stages_of(current) > 1 else ""))
     acc.checks["determined"] = claims.determined_check(acc)
-    acc.checks["cross-validation"] = claims.cross_validation(current, cur_fit.p, acc.misfit, acc.refit.p)
-    if claims.stages_of(current) > 1:  # ... and each stage's readings left out, predicted from the others
-        say(f"claim checks of {acc.hypothesis.title}: cross-validation across stages")
-        acc.checks["stage-cross-validation"] = claims.cross_validation(current, cur_fit.p, acc.misfit, acc.refit.p,
-                                                                       "stage")
+    acc.checks.update(claims.cross_validations(current, cur_fit.p, acc.misfit, acc.refit.p))
     alone = claims.single_instrument(acc.hypothesis.names)
     if alone is not None:  # an error of one instrument: every other reading explained without it
         say(f"claim checks of {acc.hypothesis.title}: an error of {alone} alone")

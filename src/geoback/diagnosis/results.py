@@ -155,7 +155,7 @@ class Diagnosis:
     method: str = "lm"  # the estimation method of every fit
     not_applicable: list = field(default_factory=list)  # (kind, why) of the catalogue's rows this model cannot take
     strength: dict = field(default_factory=dict)  # key -> yielding.StrengthProfile: an accepted yielding cause's
-    # strength with phi' profiled out (its c' interval is the estimates' one)
+    # strength with phi' and psi profiled out (its c' interval is the estimates' one)
 
     @property
     def baseline_fit(self) -> Fit:
