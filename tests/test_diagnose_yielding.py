@@ -195,6 +195,11 @@ def test_the_strength_profile_is_the_profile_likelihood_of_an_exactly_quadratic_
     # a flat objective: phi' not bounded, open at both ends, c' over the whole grid's range
     flat = combine([StrengthPoint(p.phi, 0.0, J0, p.c, s) for p in pts], "clay")
     assert flat.phi_open == (True, True) and flat.c_low == pytest.approx(math.exp(al + be * 40.0 - 1.959964 * s))
+    assert "the readings do not bound phi' within 20-40 deg" in flat.words()
+    low = combine([StrengthPoint(p.phi, 0.0, J0 + max(p.phi - 30.0, 0.0), p.c, s) for p in pts], "clay")
+    assert low.phi_open == (True, False) and 33.0 <= low.phi_high <= 34.5  # J rises by 3.84 at 33.8 deg
+    assert f"phi' up to {low.phi_high:.3g} deg, not bounded below within the 20 deg fitted" in low.words()
+    assert f"the readings allow phi' {got.phi_low:.3g} to {got.phi_high:.3g} deg;" in got.words()
     # the interval at the assumed angles joins the profile's while they lie inside the 95 % region, and is
     # dropped where the readings reject them (J there above J_min + 3.84)
     assert got.gain < 3.84 and got.interval(1.0, 1e9) == (1.0, 1e9)

@@ -385,9 +385,14 @@ class StrengthProfile:
         (lo, hi), (q0, q1) = (PROFILE_PHI[0], PROFILE_PHI[-1]), self.psi_grid
         if all(self.phi_open):
             phi = f"the readings do not bound phi' within {self.phi_low:.3g}-{self.phi_high:.3g} deg"
+        elif self.phi_open[0]:
+            phi = (f"the readings allow phi' up to {self.phi_high:.3g} deg, not bounded below within the "
+                   f"{self.phi_low:.3g} deg fitted")
+        elif self.phi_open[1]:
+            phi = (f"the readings allow phi' from {self.phi_low:.3g} deg, not bounded above within the "
+                   f"{self.phi_high:.3g} deg fitted")
         else:
-            phi = (f"the readings allow phi' {'at most ' if self.phi_open[0] else ''}{self.phi_low:.3g} to "
-                   f"{'at least ' if self.phi_open[1] else ''}{self.phi_high:.3g} deg")
+            phi = f"the readings allow phi' {self.phi_low:.3g} to {self.phi_high:.3g} deg"
         return (f"the strength of '{self.layer}' with phi' and psi not assumed: c' 95 % [{self.c_low:.4g}, "
                 f"{self.c_high:.4g}] kPa and the unconfined strength 2c' cos phi' / (1 - sin phi') 95 % "
                 f"[{self.ucs_low:.4g}, {self.ucs_high:.4g}] kPa for phi' anywhere in {lo:g}-{hi:g} deg and psi in "
