@@ -152,7 +152,8 @@ def test_yielding_around_a_heading_and_bench_is_named(tmp_path):
     assert d.final_reliability.p_value > 0.01 and d.adequate_after and s.grade == "named"
     from geoback.reports.diagnosis_report import diagnosis_text
 
-    assert "(Mohr-Coulomb, phi' = 30 deg and psi = 5 deg, the angles the readings favour)" in diagnosis_text(d)
+    assert ("the ground yields around the excavation (Mohr-Coulomb, phi' = 30 deg and psi = 5 deg, the angles the "
+            "readings favour)") in diagnosis_text(d)
 
 
 def test_a_chord_is_near_where_either_end_is():

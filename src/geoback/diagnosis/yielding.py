@@ -119,6 +119,7 @@ def screen(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
         near = np.hypot(centroid[:, 0], centroid[:, 1] + g.axis_depth) < SCREEN_RADIUS * g.radius
         c_req = required_cohesion(cell["stress_xx"], cell["stress_yy"], cell["stress_xy"])
     out = []
+    where = "excavation" if openings else "tunnel"  # a section's openings: a box, a heading and bench
     for i, layer in enumerate(case.ground.layers):
         sel = near & (mesh.region == i)
         if not sel.any():
@@ -133,9 +134,9 @@ def screen(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
         several = sum(1 for j in range(len(case.ground.layers)) if (near & (mesh.region == j)).any()) > 1
         out.append(Hypothesis(
             f"yielding[{name}]", "yielding",
-            "the ground yields around the tunnel" + (f" ('{name}')" if several else "")
+            f"the ground yields around the {where}" + (f" ('{name}')" if several else "")
             + f" (Mohr-Coulomb, phi' = {PHI:g} deg and psi = {PSI:g} deg assumed)",
-            f"The ground of '{name}' yields around the tunnel (Mohr-Coulomb, phi' = {PHI:g} deg and psi = {PSI:g} deg "
+            f"The ground of '{name}' yields around the {where} (Mohr-Coulomb, phi' = {PHI:g} deg and psi = {PSI:g} deg "
             f"fixed, c' identified). At the elastic fit its stresses near the tunnel would need c' of at least "
             f"{c_crit:.3g} kPa to stay elastic, above the {weakest:.3g} kPa of the weakest plausible ground of "
             f"E = {E:.4g} kPa (E/c = {STIFFNESS_TO_STRENGTH:g}); the refit starts from c' = {c0:.3g} kPa (a plastic "
