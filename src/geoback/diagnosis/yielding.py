@@ -298,9 +298,10 @@ FINE = 0.25  # degrees: the step at which J(phi') is interpolated between the gr
 
 
 def unconfined_strength(c, phi_deg):
-    """s_c = 2 c cos phi / (1 - sin phi) (physics/plasticity/closed_form.py)."""
-    phi = np.radians(phi_deg)
-    return 2.0 * np.asarray(c, float) * np.cos(phi) / (1.0 - np.sin(phi))
+    """s_c = 2 c cos phi / (1 - sin phi), phi in degrees (physics/plasticity/closed_form.unconfined_strength)."""
+    from geoback.physics.plasticity.closed_form import unconfined_strength as s_c
+
+    return s_c(np.asarray(c, float), np.radians(phi_deg))
 
 
 @dataclass(frozen=True)

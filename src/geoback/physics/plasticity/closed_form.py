@@ -41,6 +41,11 @@ from dataclasses import dataclass
 import numpy as np
 
 
+def unconfined_strength(c, phi):
+    """s_c = 2 c cos phi / (1 - sin phi): the Mohr-Coulomb unconfined strength (phi in radians)."""
+    return 2 * c * np.cos(phi) / (1 - np.sin(phi))
+
+
 @dataclass(frozen=True)
 class DeepTunnelMC:
     p0: float
@@ -76,7 +81,7 @@ class DeepTunnelMC:
 
     @property
     def s_c(self):
-        return 2 * self.c * np.cos(self.phi) / (1 - np.sin(self.phi))
+        return unconfined_strength(self.c, self.phi)
 
     @property
     def _A(self):
