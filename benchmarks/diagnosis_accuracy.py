@@ -408,8 +408,10 @@ def plastic_cohesion(p0: float, phi: float, ratio: float) -> float:
 
 
 def unconfined(c: float, phi: float) -> float:
-    """The unconfined strength 2 c cos phi / (1 - sin phi) [kPa] of c [kPa], phi [deg]."""
-    return 2 * c * math.cos(math.radians(phi)) / (1 - math.sin(math.radians(phi)))
+    """The unconfined strength [kPa] of c [kPa], phi [deg] (closed_form.unconfined_strength)."""
+    from geoback.physics.plasticity.closed_form import unconfined_strength
+
+    return float(unconfined_strength(c, math.radians(phi)))
 
 
 def random_yielding_case(index: int, master_seed: int, draw: int = 0) -> dict:
