@@ -356,6 +356,45 @@ def test_heading_then_bench_grows_a_plastic_zone_that_is_reported():
 
 
 @pytest.mark.quick
+def test_the_plastic_zone_figure_draws_the_openings_as_they_stand():
+    """The figure of a heading and bench: the case named in its title, the horseshoe's outline and cut
+    line drawn (not a circle of its equivalent radius, no crown or invert named on it), the ground
+    excavated by the last stage left out, every stage's zone in the legend in depths and areas, and the
+    frame holding every point that yielded."""
+    from matplotlib.collections import PolyCollection
+
+    from geoback.reports.plots.plastic import plastic_zone_figure
+    from geoback.reports.section import stage_state
+
+    sim = simulation(heading_bench(STAGED))
+    case = sim.loaded.case
+    zone = sim.plastic_zone(sim.quantities())
+    assert zone.about == "the centroid of opening 'tunnel'"
+    assert "from the centroid of opening 'tunnel'" in " ".join(zone.lines())
+    fig = plastic_zone_figure(zone, name="hb", case=case)
+    ax = fig.axes[0]
+    assert fig._suptitle.get_text() == "hb: plastic zone around the tunnel at the case's values"
+    assert not {"crown", "springline", "invert"} & {t.get_text() for t in ax.texts}
+    legend = [t.get_text() for t in ax.get_legend().get_texts()]
+    for s in zone.stages:
+        assert any(t.startswith(f"plastic zone after '{s.stage}'") and f"{s.bottom_depth:.1f} m deep" in t
+                   for t in legend), (s.stage, legend)
+    assert "openings' walls before excavation" in legend
+    void, lining = stage_state(case, sim.mesh)
+    assert void.any()
+    coloured = next(c for c in ax.collections if isinstance(c, PolyCollection) and c.get_array() is not None)
+    assert len(coloured.get_paths()) == int((~void & (lining < 0)).sum())  # the standing ground alone
+    dashed = [ln for ln in ax.lines if ln.get_linestyle() == "--" and len(ln.get_xdata()) > 10]
+    outline = np.column_stack([dashed[0].get_xdata(), dashed[0].get_ydata()])
+    r = np.hypot(*(outline[np.isfinite(outline[:, 0])] - zone.centre).T)
+    assert r.max() / r.min() > 1.2  # the horseshoe's outline, not a circle about its centroid
+    yielded = sim.mesh.nodes[np.unique(sim.mesh.triangles[np.any(zone.cell_yielded > 0, axis=0), :3])]
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    assert x0 <= yielded[:, 0].min() and yielded[:, 0].max() <= x1
+    assert y0 <= yielded[:, 1].min() and yielded[:, 1].max() <= y1
+
+
+@pytest.mark.quick
 @pytest.mark.parametrize("yielding", [False, True])
 def test_a_lining_installed_where_its_part_is_excavated_starts_stress_free(yielding):
     """A lining installed in the stage that excavates its part replaces ground that is removed: that

@@ -81,3 +81,11 @@ def test_simulate_writes_the_plastic_zone(tmp_path):
         assert (tmp_path / name).stat().st_size > 0, name
     predicted = json.loads((tmp_path / "predicted.json").read_text())
     assert predicted["plastic_zone"][-1]["stage"] == "final"
+    from geoback.reports.plots.plastic import plastic_zone_figure
+
+    fig = plastic_zone_figure(out["plastic_zone"], name=analysis.case.name, case=analysis.case)
+    assert fig._suptitle.get_text() == f"{analysis.case.name}: plastic zone around the tunnel at the case's values"
+    assert {"crown", "springline", "invert"} <= {t.get_text() for t in fig.axes[0].texts}
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert legend[0] == "after 'face-near' (release 0.5): the ground stays elastic"
+    assert "reaches" in legend[-2] and "from the axis" in legend[-2] and legend[-1] == "tunnel wall (R = 3 m)"

@@ -120,7 +120,7 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
             from geoback.reports.plots.plastic import plastic_zone_figure
 
             write_plastic_zone(zone, staging)
-            fig = plastic_zone_figure(zone, name=analysis.case.name)
+            fig = plastic_zone_figure(zone, name=analysis.case.name, case=analysis.case)
             try:
                 save_figures({"plastic_zone": fig}, staging)
             finally:

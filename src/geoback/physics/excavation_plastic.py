@@ -591,7 +591,8 @@ class YieldingExcavationSimulation(ExcavationSimulation):
                             any(s <= k for s in self.plan.groups) else 0.0 for k in range(len(self.stages))])
         w = self.ops.w.reshape(-1) * (1.0 if g.model == "half" else 0.5)  # (measure doubles a half-model's area)
         return measure(self.stages, release, self.ops.point_coordinates(), w, run.yielded, centre, radius, self.mesh,
-                       self._plastic_strain(values, run), {k: float(np.real(v)) for k, v in values.items()})
+                       self._plastic_strain(values, run), {k: float(np.real(v)) for k, v in values.items()},
+                       f"the centroid of opening '{g.openings[0].name}'")
 
     def field(self, values: Mapping) -> Field:
         """Displacement after the last stage (and after each stage as point data when there are several);

@@ -52,6 +52,8 @@ class PlasticZone:
     cell_yielded: np.ndarray  # (nstages, ne) share of each cell's area that has yielded
     cell_plastic_strain: np.ndarray  # (nstages, ne) equivalent plastic strain, cell mean
     values: dict = field(default_factory=dict)  # the named values it was computed at
+    about: str = "the tunnel axis"  # what the radii are measured from (a section with openings: the centroid of
+    # its first opening, and `radius` that opening's equivalent radius, the circle of the same area)
 
     @property
     def any(self) -> bool:
@@ -88,13 +90,17 @@ class PlasticZone:
                 continue
             out.append(f"| {s.stage} | {s.release:.3g} | {s.max_radius:.3g} | {s.max_radius / self.radius:.3g} | "
                        f"{s.top_depth:.3g}-{s.bottom_depth:.3g} | {s.area:.3g} |")
-        out += ["", "Max. radius: distance from the tunnel axis of the outermost yielded ground; area over the whole "
-                    "cross-section; resolution about one element (plastic_zone.csv gives it by angle from the crown)."]
+        R = "" if self.about == "the tunnel axis" else (
+            f"; R = {self.radius:.3g} m, the radius of the circle of the opening's area")
+        out += ["", f"Max. radius: distance from {self.about} of the outermost yielded ground{R}; area over the whole "
+                    "cross-section; resolution about one element (plastic_zone.csv gives it by angle from the upward "
+                    "vertical through that point)."]
         return out
 
 
 def measure(stages: list[str], release: np.ndarray, xy: np.ndarray, weights: np.ndarray, yielded: np.ndarray,
-            centre, radius: float, mesh, plastic_strain: np.ndarray, values: dict | None = None) -> PlasticZone:
+            centre, radius: float, mesh, plastic_strain: np.ndarray, values: dict | None = None,
+            about: str = "the tunnel axis") -> PlasticZone:
     """The plastic zone from point data: xy (npts, 2), weights (npts,), yielded (nstages, npts) bool,
     plastic_strain (nstages, npts); points numbered element by element (nq per element)."""
     d = xy - np.asarray(centre, float)
@@ -120,7 +126,7 @@ def measure(stages: list[str], release: np.ndarray, xy: np.ndarray, weights: np.
     share = (yielded.reshape(len(stages), ne, nq) * w).sum(axis=2) / w.sum(axis=1)
     strain = (plastic_strain.reshape(len(stages), ne, nq) * w).sum(axis=2) / w.sum(axis=1)
     return PlasticZone(radius, tuple(np.asarray(centre, float)), sectors, zones, mesh, share, strain,
-                       dict(values or {}))
+                       dict(values or {}), about)
 
 
 def equivalent_plastic_strain(strain: np.ndarray, dstress: np.ndarray, E: np.ndarray, nu: np.ndarray) -> np.ndarray:
