@@ -134,7 +134,7 @@ COLUMNS = ["case", "kind", "parameter", "magnitude", "effect_size", "raw_movemen
            "cause", "named_cause", "accepted", "tentative", "estimate", "covered", "rival", "round1", "p_before",
            "chi2dof_before", "chi2dof_after", "top_score_kind", "readings", "seconds", "R", "axis_depth", "E", "nu",
            "K0", "layout", "noise_seed", "seed", "draw", "grade", "failed_checks", "left_out", "adequate_after",
-           "truth_margin", "error"]
+           "p_after", "truth_margin", "error"]
 SINGLED_OUT = 10.0  # AIC: the truth's family ahead of every other family's refit by this much (claims.RIVAL_AIC)
 
 
@@ -590,6 +590,7 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
                                                        else "") for s in d.accepted
                                         for c in getattr(s, "checks", {}).values() if not c.passed)
         row["adequate_after"] = bool(d.adequate_after)
+        row["p_after"] = float(d.final_reliability.p_value)  # the final joint fit's chi^2 test (claims.adequacy)
         if d.accepted:
             s = d.accepted[0]
             row["tentative"] = not s.determined

@@ -65,6 +65,7 @@ def test_concealed_effect_is_named_estimated_and_fixes_the_fit(name):
         assert [r.hypothesis.kind for r in d.accepted[0].rivals] == ["K0-gradient"]
     else:
         assert d.grade == "named", failed
+        assert rel.p_value >= d.alpha  # a named cause's final model passes the chi^2 test the verdict states
     assert d.causes[cause] and not d.causes["ground" if cause == "instrument" else "instrument"]
 
 

@@ -274,6 +274,22 @@ def test_a_cause_that_leaves_the_model_inadequate_is_not_named():
     assert all(e["ci95"] is None for e in js["missing"][0]["estimates"].values())
 
 
+def test_adequacy_is_judged_at_the_level_the_verdict_calls_a_model_adequate():
+    """Check 6 at the diagnosis' level (0.05), not at the other checks' 0.01: the leave-one-family-out
+    benchmark named a yielding zone standing in for a stratum (seed 2027, bench-027) with a final model at
+    chi^2 = 57.27 on 36 dof, p = 0.0135, while its verdict said "still not adequate"."""
+    from scipy.stats import chi2
+
+    from geoback.diagnosis import claims
+
+    p = float(chi2.sf(57.27, 36))
+    assert 0.01 < p < 0.05
+    check = claims.adequacy(57.27, 36, p, 0.05)
+    assert not check.passed and "still does not explain" in check.text and check.detail["level"] == 0.05
+    assert claims.adequacy(40.0, 36, float(chi2.sf(40.0, 36)), 0.05).passed
+    assert claims.adequacy(0.0, 0, float("nan"), 0.05).passed  # nothing left to test it with
+
+
 def _refitted(name: str, key: str):
     """A concealed case's baseline fit and a Scored refit of hypothesis `key`, judged as diagnose judges it."""
     from geoback.diagnosis.hypotheses import candidate_hypotheses

@@ -423,7 +423,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     final = conclude(current, cur_fit, extended.case, extended.digest(), {}, {}, settings=settings)
     if accepted:  # ... and a final model that explains the readings (else the library lacks something)
         rel = final.reliability
-        enough = claims.adequacy(rel.chi2, rel.dof, rel.p_value, min(alpha, claims.STRUCTURE_ALPHA))
+        enough = claims.adequacy(rel.chi2, rel.dof, rel.p_value, alpha)  # (the level the verdict's 'adequate' uses)
         for s in accepted:
             s.checks["residual-structure"] = left
             s.checks["adequacy"] = enough
