@@ -73,6 +73,39 @@ def test_diagnosis_text_says_it(yielding):
     assert "Missing - Ground physics: the ground yields around the tunnel" in text and "| nan" not in text
 
 
+def test_the_diagnosis_shows_where_the_ground_yields(yielding, tmp_path):
+    """With yielding accepted, the written diagnosis says where the ground yields in the final joint
+    fit: its section in diagnosis.md, plastic_zone.csv, "plastic_zone" in diagnosis.json and the
+    figure, all from the same zone (the final model's, at the final estimate)."""
+    import csv
+    import json
+
+    from geoback.reports.diagnosis_report import final_plastic_zone, write_diagnosis
+
+    zone = final_plastic_zone(yielding)
+    final = zone.stages[-1]
+    assert final.yielded_points > 0 and 1.2 < final.max_radius / 3.0 < 2.0
+    write_diagnosis(yielding, tmp_path)
+    text = (tmp_path / "diagnosis.md").read_text(encoding="utf-8")
+    assert "## Plastic zone of the final joint fit" in text and f"| {final.max_radius:.3g} |" in text
+    assert "![Figure 2: Where the ground yields in the final joint fit, after every stage](plastic_zone.png)" in text
+    js = json.loads((tmp_path / "diagnosis.json").read_text(encoding="utf-8"))
+    assert js["plastic_zone"][-1]["max_radius_m"] == pytest.approx(final.max_radius)
+    with open(tmp_path / "plastic_zone.csv", newline="", encoding="utf-8") as fh:
+        rows = [r for r in csv.DictReader(fh) if r["sector_deg"] == "all"]
+    assert float(rows[-1]["plastic_radius_m"]) == pytest.approx(final.max_radius)
+    assert (tmp_path / "plastic_zone.png").stat().st_size > 10_000 and (tmp_path / "plastic_zone.svg").exists()
+    assert "plastic_zone.png" in (tmp_path / "diagnosis.html").read_text(encoding="utf-8")
+
+
+def test_nothing_yields_in_a_diagnosis_without_yielding(tmp_path):
+    """No yielding accepted: no plastic zone is written (the elastic final model has none)."""
+    from geoback.reports.diagnosis_report import final_plastic_zone
+
+    d = diagnose(load_case(CONCEALED / "null-1.yaml"))
+    assert final_plastic_zone(d) is None
+
+
 def test_the_strength_of_a_true_plastic_zone_is_determined_in_the_final_fit(yielding):
     """Check 4 in the final joint fit (claims.final_determined): the readings bound c' of a true plastic
     zone on both sides, so yielding stays named (a zone standing in for a stratum: test_diagnose_claims)."""

@@ -351,7 +351,8 @@ def diagnose(case: Path = typer.Argument(..., help="case file (YAML)"),
             typer.echo(verdict(d))
         amended = ", amended.yaml (the case with the accepted extensions: `geoback run` it to go on)" \
             if d.accepted else ""
-        typer.echo(f"-> {folder}/diagnosis.md, diagnosis.html, diagnosis.json{amended}", err=True)
+        zone = ", plastic_zone.csv (where the ground yields)" if (folder / "plastic_zone.csv").exists() else ""
+        typer.echo(f"-> {folder}/diagnosis.md, diagnosis.html, diagnosis.json{zone}{amended}", err=True)
         if _cut_short("the diagnosis"):
             raise typer.Exit(1)
 

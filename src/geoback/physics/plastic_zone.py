@@ -90,11 +90,11 @@ class PlasticZone:
                 continue
             out.append(f"| {s.stage} | {s.release:.3g} | {s.max_radius:.3g} | {s.max_radius / self.radius:.3g} | "
                        f"{s.top_depth:.3g}-{s.bottom_depth:.3g} | {s.area:.3g} |")
-        R = "" if self.about == "the tunnel axis" else (
-            f"; R = {self.radius:.3g} m, the radius of the circle of the opening's area")
+        tunnel = self.about == "the tunnel axis"
+        R = "" if tunnel else f"; R = {self.radius:.3g} m, the radius of the circle of the opening's area"
+        angle = "the crown" if tunnel else "the upward vertical through that centroid"
         out += ["", f"Max. radius: distance from {self.about} of the outermost yielded ground{R}; area over the whole "
-                    "cross-section; resolution about one element (plastic_zone.csv gives it by angle from the upward "
-                    "vertical through that point)."]
+                    f"cross-section; resolution about one element (plastic_zone.csv gives it by angle from {angle})."]
         return out
 
 

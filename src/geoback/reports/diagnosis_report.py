@@ -491,14 +491,34 @@ def diagnosis_json(d) -> dict:
     }
 
 
+def final_plastic_zone(d):
+    """Where the ground yields in the final joint fit, when a yielding cause was accepted (a
+    ``plastic_zone.PlasticZone``, at the final estimate and with the angles the model took), else None."""
+    if not any(s.hypothesis.kind == "yielding" for s in d.accepted):
+        return None
+    return d.final_misfit.simulation.plastic_zone(d.final_misfit.values(d.final_fit.p))
+
+
 def write_diagnosis(d, out: Path, plots: bool = True, exploration=None) -> None:
     """diagnosis.md, diagnosis.json and (plots) diagnosis.png/.svg, replacing the previous set in `out`
-    as a whole; `exploration` gives the figure the model along each instrument at the final fit."""
+    as a whole; `exploration` gives the figure the model along each instrument at the final fit. Where
+    yielding was accepted, also the plastic zone of the final joint fit: its section in diagnosis.md,
+    plastic_zone.csv, "plastic_zone" in diagnosis.json and (plots) plastic_zone.png/.svg."""
     from geoback.reports.html import DIAGNOSIS_HOW_TO_READ, write_html
 
+    zone = final_plastic_zone(d)
     with result_set(out, "diagnose") as staging:
         text = diagnosis_text(d)
-        write_json(staging / "diagnosis.json", diagnosis_json(d))
+        js = diagnosis_json(d)
+        if zone is not None:
+            from geoback.reports.fields import write_plastic_zone
+
+            write_plastic_zone(zone, staging)
+            js["plastic_zone"] = zone.as_dict()
+            lines = zone.lines()
+            lines[1] = "## Plastic zone of the final joint fit"
+            text += "\n".join(lines) + "\n"
+        write_json(staging / "diagnosis.json", js)
         if d.accepted and d.loaded is not None:  # paths in it relative to `out`, where it ends up
             write_atomic(staging / AMENDED, amended_text(d, Path(out)))
         if plots:
@@ -508,6 +528,18 @@ def write_diagnosis(d, out: Path, plots: bool = True, exploration=None) -> None:
             what = "Measured and computed readings along every instrument, before and after the diagnosis"
             text += f"\n## Figures\n\n**Figure 1.** {what} (diagnosis.png; vector graphics: diagnosis.svg).\n\n" \
                     f"![Figure 1: {what}](diagnosis.png)\n"
+            if zone is not None:
+                from geoback.reports.plots import save_figures
+                from geoback.reports.plots.plastic import plastic_zone_figure
+
+                fig = plastic_zone_figure(zone, d.final, at="in the final joint fit of the diagnosis")
+                try:
+                    save_figures({"plastic_zone": fig}, staging)
+                finally:
+                    fig.clear()
+                what = "Where the ground yields in the final joint fit, after every stage"
+                text += f"\n**Figure 2.** {what} (plastic_zone.png; vector graphics: plastic_zone.svg).\n\n" \
+                        f"![Figure 2: {what}](plastic_zone.png)\n"
         write_atomic(staging / "diagnosis.md", text)
         write_html(staging / "diagnosis.html", text, staging, name=d.case, kind="diagnosis report",
                    how_to_read=DIAGNOSIS_HOW_TO_READ)

@@ -35,10 +35,11 @@ def _extent_words(zone, s) -> str:
     return f"{s.top_depth:.1f} to {s.bottom_depth:.1f} m deep, {s.area:.3g} m²"
 
 
-def plastic_zone_figure(zone, res=None, name: str | None = None, case=None) -> Figure:
+def plastic_zone_figure(zone, res=None, name: str | None = None, case=None, at: str | None = None) -> Figure:
     """`zone`: a plastic_zone.PlasticZone (from the exploration or a forward run); `res`: the
     identification it belongs to (for the title and the case), or None (a forward run at the case's
-    values, of the case `name`; `case` the case, needed to draw a section with openings)."""
+    values, of the case `name`; `case` the case, needed to draw a section with openings); `at`: the
+    title's words for the values (default: at the estimate, or at the case's values)."""
     case = res.case if res is not None else case
     openings = case is not None and section.has_openings(case)
     mesh = zone.mesh
@@ -85,7 +86,7 @@ def plastic_zone_figure(zone, res=None, name: str | None = None, case=None) -> F
         cb.set_label(f"equivalent plastic strain after '{zone.stages[last].stage}' [%]")
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.07), fontsize=8, frameon=False)
     who = f"{res.name}: " if res is not None else f"{name}: " if name else ""
-    at = "at the estimate" if res is not None else "at the case's values"
+    at = at or ("at the estimate" if res is not None else "at the case's values")
     around = section.zoom_title(case).lower() if case is not None else "around the tunnel"
     sub = textwrap.fill(f"({estimate_text(res.parameters, res.fit.p)})", 90) if res is not None else ""
     state = "" if zone.any else " - the ground stays elastic"
