@@ -159,6 +159,20 @@ def test_huge_cohesion_is_the_elastic_removal_model():
     band = sim.mesh.band == sim.mesh.band_names.index("shotcrete")
     assert np.all(np.isfinite(s[band])) and np.mean(s[band][:, 0] + s[band][:, 1]) < 0
     np.testing.assert_array_equal(np.isfinite(s[:, 0]), np.isfinite(elastic.element_stress(elastic.quantities(), k=1)[:, 0]))
+    # its plastic-zone figure: every stage elastic in words, the linings standing after the last stage drawn
+    from geoback.reports.plots.plastic import plastic_zone_figure
+
+    zone = sim.plastic_zone(values)
+    fig = plastic_zone_figure(zone, name="lined", case=sim.loaded.case)
+    assert fig._suptitle.get_text() == "lined: plastic zone around the tunnel at the case's values - the ground stays elastic"
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert [t for t in legend if "stays elastic" in t] == [f"after '{st['name']}'" + (
+        f" (release {st['release']:.2g})" if st.get("release", 1.0) < 1 else "") + ": the ground stays elastic"
+        for st in LINED]
+    standing = next(t for t in legend if "standing after" in t)
+    assert "'ring'" in standing and standing.endswith(f"standing after '{LINED[-1]['name']}'")
+    assert len(fig.axes) == 1  # no colour bar without plastic strain
+    fig.clear()
 
 
 # ---------------------------------------------------------------------------- against traction release
