@@ -78,9 +78,9 @@ class PlasticZone:
                  "top_depth_m": s.top_depth, "bottom_depth_m": s.bottom_depth, "area_m2": s.area}
                 for s in self.stages]
 
-    def lines(self) -> list[str]:
-        """The report's section (Markdown)."""
-        out = ["", "## Plastic zone", ""]
+    def lines(self, heading: str = "Plastic zone") -> list[str]:
+        """The report's section (Markdown) under `heading`."""
+        out = ["", f"## {heading}", ""]
         if not self.any:
             return out + ["The ground stays elastic: no point reaches the Mohr-Coulomb strength at any stage."]
         out += ["| stage | release | max. radius [m] | R_p / R | depth range [m] | area [m²] |", "|---|---|---|---|---|---|"]

@@ -515,9 +515,7 @@ def write_diagnosis(d, out: Path, plots: bool = True, exploration=None) -> None:
 
             write_plastic_zone(zone, staging)
             js["plastic_zone"] = zone.as_dict()
-            lines = zone.lines()
-            lines[1] = "## Plastic zone of the final joint fit"
-            text += "\n".join(lines) + "\n"
+            text += "\n".join(zone.lines("Plastic zone of the final joint fit")) + "\n"
         write_json(staging / "diagnosis.json", js)
         if d.accepted and d.loaded is not None:  # paths in it relative to `out`, where it ends up
             write_atomic(staging / AMENDED, amended_text(d, Path(out)))
