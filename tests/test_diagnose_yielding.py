@@ -95,6 +95,11 @@ def test_the_diagnosis_shows_where_the_ground_yields(yielding, tmp_path):
         rows = [r for r in csv.DictReader(fh) if r["sector_deg"] == "all"]
     assert float(rows[-1]["plastic_radius_m"]) == pytest.approx(final.max_radius)
     assert (tmp_path / "plastic_zone.png").stat().st_size > 10_000 and (tmp_path / "plastic_zone.svg").exists()
+    from geoback.reports.plots.plastic import plastic_zone_figure
+
+    title = plastic_zone_figure(zone, yielding.final, at="in the final joint fit of the diagnosis")._suptitle.get_text()
+    assert "plastic zone around the tunnel in the final joint fit of the diagnosis" in title
+    assert "phi' = 30 deg, psi = 0 deg in 'clay' (not fitted)" in title.replace("\n", " ")  # the angles held
     assert "plastic_zone.png" in (tmp_path / "diagnosis.html").read_text(encoding="utf-8")
 
 

@@ -164,7 +164,8 @@ def test_huge_cohesion_is_the_elastic_removal_model():
 
     zone = sim.plastic_zone(values)
     fig = plastic_zone_figure(zone, name="lined", case=sim.loaded.case)
-    assert fig._suptitle.get_text() == "lined: plastic zone around the tunnel at the case's values - the ground stays elastic"
+    assert fig._suptitle.get_text().split("\n")[0] == ("lined: plastic zone around the tunnel at the case's values - "
+                                                        "the ground stays elastic")
     legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     assert [t for t in legend if "stays elastic" in t] == [f"after '{st['name']}'" + (
         f" (release {st['release']:.2g})" if st.get("release", 1.0) < 1 else "") + ": the ground stays elastic"
@@ -387,7 +388,9 @@ def test_the_plastic_zone_figure_draws_the_openings_as_they_stand():
     assert "from the centroid of opening 'tunnel'" in " ".join(zone.lines())
     fig = plastic_zone_figure(zone, name="hb", case=case)
     ax = fig.axes[0]
-    assert fig._suptitle.get_text() == "hb: plastic zone around the tunnel at the case's values"
+    head, strength = fig._suptitle.get_text().split("\n")
+    assert head == "hb: plastic zone around the tunnel at the case's values"
+    assert strength == "('marl': c' = 50 kPa, phi' = 30 deg, psi = 5 deg)"  # the strength it was drawn at (marl())
     assert not {"crown", "springline", "invert"} & {t.get_text() for t in ax.texts}
     legend = [t.get_text() for t in ax.get_legend().get_texts()]
     for s in zone.stages:

@@ -88,10 +88,27 @@ def plastic_zone_figure(zone, res=None, name: str | None = None, case=None, at: 
     who = f"{res.name}: " if res is not None else f"{name}: " if name else ""
     at = at or ("at the estimate" if res is not None else "at the case's values")
     around = section.zoom_title(case).lower() if case is not None else "around the tunnel"
-    sub = textwrap.fill(f"({estimate_text(res.parameters, res.fit.p)})", 90) if res is not None else ""
+    fitted = list(res.parameters.names) if res is not None else []
+    est = [estimate_text(res.parameters, res.fit.p)] if res is not None else []
+    sub = textwrap.fill("(" + "; ".join(est + _strength_words(zone.values, fitted)) + ")", 90) if (
+        est or _strength_words(zone.values, fitted)) else ""
     state = "" if zone.any else " - the ground stays elastic"
     fig.suptitle(f"{who}plastic zone {around} {at}{state}" + (f"\n{sub}" if sub else ""), fontsize=10.5)
     return fig
+
+
+def _strength_words(values: dict, fitted: list) -> list[str]:
+    """The Mohr-Coulomb strength of every layer that may yield, the values not fitted: e.g. "phi' = 30 deg,
+    psi = 0 deg in 'soft' (not fitted)", or with nothing fitted "'marl': c' = 40 kPa, phi' = 30 deg, psi = 5 deg"."""
+    out = []
+    for layer in sorted(k[4:-1] for k in values if k.startswith("phi[")):
+        parts = [(f"c[{layer}]", "c'", "kPa"), (f"phi[{layer}]", "phi'", "deg"), (f"psi[{layer}]", "psi", "deg")]
+        held = [f"{word} = {values[k]:.4g} {unit}" for k, word, unit in parts if k in values and k not in fitted]
+        if held and fitted:
+            out.append(f"{', '.join(held)} in '{layer}' (not fitted)")
+        elif held:
+            out.append(f"'{layer}': {', '.join(held)}")
+    return out
 
 
 def _draw_tunnel(ax, zone, handles) -> None:
