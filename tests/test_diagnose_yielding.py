@@ -103,6 +103,39 @@ def test_the_diagnosis_shows_where_the_ground_yields(yielding, tmp_path):
     assert "plastic_zone.png" in (tmp_path / "diagnosis.html").read_text(encoding="utf-8")
 
 
+def test_the_diagnosis_html_shows_both_figures_in_headless_chromium(yielding, tmp_path):
+    """diagnosis.html of a yielding diagnosis, opened in a real headless browser: both figures (the
+    readings before and after, where the ground yields) load, nothing is fetched from outside and no
+    script error is raised."""
+    from test_html_report import BROWSER_ARGS, browser_or_skip, outside_references
+
+    from geoback.reports.diagnosis_report import write_diagnosis
+
+    exe = browser_or_skip()
+    from playwright.sync_api import sync_playwright
+
+    write_diagnosis(yielding, tmp_path)
+    page_file = tmp_path / "diagnosis.html"
+    assert outside_references(page_file.read_text(encoding="utf-8")) == []
+    errors, failed = [], []
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=exe, args=BROWSER_ARGS)
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 900})
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.on("requestfailed", lambda r: failed.append(r.url))
+            page.goto(page_file.as_uri(), wait_until="load")
+            assert "Plastic zone of the final joint fit" in page.inner_text("main")
+            images = page.evaluate("() => Array.from(document.images).map(i => [i.complete, i.naturalWidth, i.alt])")
+        finally:
+            browser.close()
+    assert errors == [] and failed == [], (errors, failed)
+    assert [alt for _, _, alt in images] == [
+        "Figure 1: Measured and computed readings along every instrument, before and after the diagnosis",
+        "Figure 2: Where the ground yields in the final joint fit, after every stage"]
+    assert all(done and width > 0 for done, width, _ in images), images
+
+
 def test_nothing_yields_in_a_diagnosis_without_yielding(tmp_path):
     """No yielding accepted: no plastic zone is written (the elastic final model has none)."""
     from geoback.reports.diagnosis_report import final_plastic_zone
