@@ -68,8 +68,8 @@ Increments, warm starts, progress and the time limit are those of ``plastic.py``
 increment halved, each increment's Newton iteration started from the last run with sensitivities
 carried to the new values to first order (its solution of the increment plus du/dp dp: ``Runs.predicted``;
 else the last run's solution) where that is closer (on the heading-and-bench case's identification,
-1077 factorisations became 891, the estimates the same to six digits), progress lines and ``errors.TimeLimit`` through ``plastic.Watch``. A run that does not
-converge raises ``plasticity.NonConvergence`` naming the construction stage. A replay for finite
+1077 factorisations became 891, the estimates the same to six digits), progress lines and
+``errors.TimeLimit`` through ``plastic.Watch``. A run that does not converge raises ``plasticity.NonConvergence`` naming the construction stage. A replay for finite
 differences (``replaying``) iterates each increment to the residual's rounding floor (``REPLAY_TOL``,
 ``REPLAY_FLOOR``: ``Options.floor``). ``_Run.branch`` (the yielding points after every increment) tells
 whether two runs are on the same branch, between which finite differences converge to the sensitivities.

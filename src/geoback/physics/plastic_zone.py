@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 SECTOR = 15.0  # degrees
+AXIS = "the tunnel axis"  # what a circular tunnel's radii are measured from (PlasticZone.about)
 HEADER = ["stage", "release", "sector_deg", "angle_from_crown_deg", "plastic_radius_m", "extent_beyond_wall_m",
           "top_depth_m", "bottom_depth_m", "area_m2", "yielded_points"]
 
@@ -52,7 +53,7 @@ class PlasticZone:
     cell_yielded: np.ndarray  # (nstages, ne) share of each cell's area that has yielded
     cell_plastic_strain: np.ndarray  # (nstages, ne) equivalent plastic strain, cell mean
     values: dict = field(default_factory=dict)  # the named values it was computed at
-    about: str = "the tunnel axis"  # what the radii are measured from (a section with openings: the centroid of
+    about: str = AXIS  # what the radii are measured from (a section with openings: the centroid of
     # its first opening, and `radius` that opening's equivalent radius, the circle of the same area)
 
     @property
@@ -90,7 +91,7 @@ class PlasticZone:
                 continue
             out.append(f"| {s.stage} | {s.release:.3g} | {s.max_radius:.3g} | {s.max_radius / self.radius:.3g} | "
                        f"{s.top_depth:.3g}-{s.bottom_depth:.3g} | {s.area:.3g} |")
-        tunnel = self.about == "the tunnel axis"
+        tunnel = self.about == AXIS
         R = "" if tunnel else f"; R = {self.radius:.3g} m, the radius of the circle of the opening's area"
         angle = "the crown" if tunnel else "the upward vertical through that centroid"
         out += ["", f"Max. radius: distance from {self.about} of the outermost yielded ground{R}; area over the whole "
@@ -100,7 +101,7 @@ class PlasticZone:
 
 def measure(stages: list[str], release: np.ndarray, xy: np.ndarray, weights: np.ndarray, yielded: np.ndarray,
             centre, radius: float, mesh, plastic_strain: np.ndarray, values: dict | None = None,
-            about: str = "the tunnel axis") -> PlasticZone:
+            about: str = AXIS) -> PlasticZone:
     """The plastic zone from point data: xy (npts, 2), weights (npts,), yielded (nstages, npts) bool,
     plastic_strain (nstages, npts); points numbered element by element (nq per element)."""
     d = xy - np.asarray(centre, float)

@@ -13,11 +13,11 @@ from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.tri import Triangulation
 
+from geoback.physics.plastic_zone import AXIS
 from geoback.reports import section
 from geoback.reports.plots.common import HALO, estimate_text, new_figure
 
 STAGE_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#8c564b", "#17becf")
-LINING = section.LINING
 
 
 def _nodal(mesh, cell: np.ndarray) -> np.ndarray:
@@ -30,7 +30,7 @@ def _nodal(mesh, cell: np.ndarray) -> np.ndarray:
 
 def _extent_words(zone, s) -> str:
     """How far a stage's zone reaches, as its legend says it."""
-    if zone.about == "the tunnel axis":
+    if zone.about == AXIS:
         return f"reaches {s.max_radius:.2f} m from the axis ({s.max_radius / zone.radius:.2f} R)"
     return f"{s.top_depth:.1f} to {s.bottom_depth:.1f} m deep, {s.area:.3g} m²"
 
@@ -89,9 +89,8 @@ def plastic_zone_figure(zone, res=None, name: str | None = None, case=None, at: 
     at = at or ("at the estimate" if res is not None else "at the case's values")
     around = section.zoom_title(case).lower() if case is not None else "around the tunnel"
     fitted = list(res.parameters.names) if res is not None else []
-    est = [estimate_text(res.parameters, res.fit.p)] if res is not None else []
-    sub = textwrap.fill("(" + "; ".join(est + _strength_words(zone.values, fitted)) + ")", 90) if (
-        est or _strength_words(zone.values, fitted)) else ""
+    words = ([estimate_text(res.parameters, res.fit.p)] if res is not None else []) + _strength_words(zone.values, fitted)
+    sub = textwrap.fill("(" + "; ".join(words) + ")", 90) if words else ""
     state = "" if zone.any else " - the ground stays elastic"
     fig.suptitle(f"{who}plastic zone {around} {at}{state}" + (f"\n{sub}" if sub else ""), fontsize=10.5)
     return fig
@@ -162,11 +161,11 @@ def _draw_openings(ax, case, mesh, standing, zone, handles) -> None:
     stages = zone.stages
     if (standing >= 0).any():
         tri = mesh.nodes[mesh.triangles[standing >= 0][:, :3]]
-        ax.add_collection(PolyCollection(tri, facecolors=LINING, edgecolors=LINING, linewidths=0.3, zorder=3))
+        ax.add_collection(PolyCollection(tri, facecolors=section.LINING, edgecolors=section.LINING, linewidths=0.3, zorder=3))
         names = [mesh.band_names[i] for i in np.unique(standing[standing >= 0])]
         walls = set(section.wall_names(case))
         words = ", ".join(f"wall '{n}'" if n in walls else f"lining '{n}'" for n in names)
-        handles.append(ax.plot([], [], color=LINING, lw=5, label=f"{words}, standing after '{stages[-1].stage}'")[0])
+        handles.append(ax.plot([], [], color=section.LINING, lw=5, label=f"{words}, standing after '{stages[-1].stage}'")[0])
     section.draw_section(ax, case, label=False, colour="0.1")
     handles.append(ax.plot([], [], color="0.1", lw=1.3, ls="--", label="openings' walls before excavation")[0])
     zx, zy = _frame(case, zone)
