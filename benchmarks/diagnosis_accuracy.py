@@ -63,7 +63,11 @@ phi' and psi are drawn, the refit assumes 30 and 0 deg).
 
     python benchmarks/diagnosis_accuracy.py [--concealed 60] [--null 30] [--staged 0] [--yielding 0]
         [--seed 2024 | --seeds 2024 2025 ...] [--workers 2] [--out benchmarks/out/diagnosis_accuracy.csv]
-        [--show INDEX] [--leave-out]
+        [--show INDEX] [--leave-out] [--only KIND ...]
+
+--only KIND ... diagnoses the cases of those kinds among the cases drawn (the same cases as without it, e.g.
+every true stratum of several seeds). The CSV's 'boundary_seen' gives, per stratum accepted, claims check 8:
+readings below : their J gain / the refit's : d |d| : z z @ depth / deepest reading.
 
 --seeds runs one set of cases per master seed (the same counts each) and prints each seed's summary, then,
 with --leave-out, the confident-wrong rate pooled over the seeds with its binomial standard error.
@@ -134,7 +138,7 @@ COLUMNS = ["case", "kind", "parameter", "magnitude", "effect_size", "raw_movemen
            "cause", "named_cause", "accepted", "tentative", "estimate", "covered", "rival", "round1", "p_before",
            "chi2dof_before", "chi2dof_after", "top_score_kind", "readings", "seconds", "R", "axis_depth", "E", "nu",
            "K0", "layout", "noise_seed", "seed", "draw", "grade", "failed_checks", "left_out", "adequate_after",
-           "p_after", "truth_margin", "error"]
+           "p_after", "boundary_seen", "truth_margin", "error"]
 SINGLED_OUT = 10.0  # AIC: the truth's family ahead of every other family's refit by this much (claims.RIVAL_AIC)
 
 
@@ -591,6 +595,12 @@ def run_one(spec: dict, folder: str, show: bool = False) -> dict:
                                         for c in getattr(s, "checks", {}).values() if not c.passed)
         row["adequate_after"] = bool(d.adequate_after)
         row["p_after"] = float(d.final_reliability.p_value)  # the final joint fit's chi^2 test (claims.adequacy)
+        row["boundary_seen"] = " ".join(  # check 8 of a stratum accepted: readings below, their gain / the refit's
+            f"{c.detail['readings_below']}:{c.detail['below_gain']:.3g}/{c.detail['gain']:.3g}"
+            f":d{c.detail['change_below']:.3g}:z{c.detail['z']:.3g}"
+            f"@{c.detail['depth']:.3g}/{c.detail['deepest_reading']:.3g}"
+            for s in d.accepted if (c := getattr(s, "checks", {}).get("boundary-seen")) is not None
+            and "depth" in c.detail)
         if d.accepted:
             s = d.accepted[0]
             row["tentative"] = not s.determined
@@ -939,6 +949,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=None, metavar="SEED",
                     help="several master seeds, one set of cases each (summaries per seed, then pooled); "
                          "overrides --seed")
+    ap.add_argument("--only", nargs="+", default=None, metavar="KIND",
+                    help="diagnose only the cases of these kinds (drawn as without it: the same cases, a subset)")
     ap.add_argument("--workers", type=int, default=2, help="worker processes")
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="CSV, one row per case")
     ap.add_argument("--mesh-cache", type=Path, default=None,
@@ -951,6 +963,11 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     seeds = args.seeds or [args.seed]
     specs = [sp for seed in seeds for sp in make_specs(args, seed)]
+    if args.only:
+        unknown = sorted(set(args.only) - {sp["kind"] for seed in seeds for sp in make_specs(args, seed)})
+        if unknown:
+            ap.error(f"--only: no case of kind {', '.join(unknown)} among those drawn")
+        specs = [sp for sp in specs if sp["kind"] in args.only]
 
     work = Path(tempfile.mkdtemp(prefix="geoback-diagacc-"))
     cache = args.mesh_cache or (work / "cache")  # a temporary cache goes with `work`

@@ -44,6 +44,10 @@ def test_concealed_effect_is_named_estimated_and_fixes_the_fit(name):
         prof = d.depth_profile(d.accepted[0])
         assert prof.has_interval and prof.low <= 16.0 <= prof.high and prof.high - prof.low < 1.0
         assert not prof.low_open and not prof.high_open
+        # check 8: the inclinometer readings below the boundary improve with it themselves
+        seen = d.accepted[0].checks["boundary-seen"]
+        assert seen.passed and seen.detail["testable"] and seen.detail["z"] > seen.detail["needed"]
+        assert seen.detail["below_gain"] > 0
         # the figure draws the accepted boundary at its depth, with its interval, on the panels that reach it
         from geoback.inference.explore import explore
         from geoback.reports.plots.diagnosis import before_after_figure

@@ -97,6 +97,26 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    modulus gradient for two anisotropic grounds of the leave-out benchmark). Where the case has stages, a cross-validation by stage was also considered
    (plastic strain grows non-linearly with the release, a stratum's effect does not); no case of the
    benchmark has one (yielding is not proposed with a lining on a circular tunnel), so it is not built.
+8. A stratum the readings below it show (``boundary_seen``), for a layer boundary: the readings taken at or
+   below the refit's boundary depth (a linewise instrument's at its station, not its reference end) must
+   follow the change the stratum makes there. With r0, r1 the whitened residuals of the model without and
+   with it and d = r0 - r1 over those readings (the change the stratum makes to their whitened prediction),
+
+       z = d . r1 / |d|,
+
+   N(0, 1) under the claim (narrower: fitted residuals), and about -|d| for a surrogate whose readings below
+   the model without it already fitted. The check fails when z < Phi^-1(alpha), one-sided at the diagnosis'
+   level (as check 6), where the readings could tell: |d| at least that quantile's size (a smaller change
+   cannot be told from noise, and the check says the claim rests on the readings above). No reading below
+   the boundary: passed, saying so and the depth an instrument must reach. Reason: a stratum changes the
+   ground below its boundary; a surrogate for a ground that differs near the opening (a plastic zone,
+   anisotropy) is placed deep to stiffen the far field, and the readings it crosses say so. Measured on the
+   leave-one-family-out benchmark (seeds 2024-2029, 176 cases with effect > 3 sigma) the confident wrong
+   causes went from 12 to 10 (2029 bench-004, an anisotropic ground named a stratum at 11.6 m: z = -1.72 with
+   |d| = 1.87; 2029 bench-040, a yielding ground, z = -1.89), and on 31 true strata of the full library
+   (seeds 2024-2031, --only layer-boundary) none of the 23 named became explained (their z from -0.81 to
+   0.74 where testable). Asking the readings below to improve by chi^2(1) at 1 % instead demoted 14 of those
+   23 true strata (a boundary a little above an inclinometer's toe has one or two readings below it).
 """
 from __future__ import annotations
 
@@ -118,7 +138,7 @@ FLOOR = 1e-8  # relative eigenvalue of the scaled information below which a dire
 @dataclass
 class Check:
     name: str  # 'cross-validation', 'residual-structure', 'rivals', 'determined', 'instrument-alone', 'adequacy',
-    # 'plastic-zone'
+    # 'plastic-zone', 'boundary-seen'
     passed: bool
     text: str  # one sentence
     detail: dict = field(default_factory=dict)
@@ -506,6 +526,64 @@ def readings_near(block, centre, reach: float) -> np.ndarray:
         return np.hypot(*(np.asarray(block.stations, float) - np.asarray(centre, float)).T) < reach
     near = np.hypot(*(np.asarray(block.points, float) - np.asarray(centre, float)).T) < reach
     return (np.abs(np.asarray(block.weights, float)).sum(axis=2) > 0) @ near > 0
+
+
+def boundary_seen(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarray, layer: str, depth: float,
+                  alpha: float) -> Check:
+    """Check 8, for a layer boundary: the readings taken at or below the refit's boundary depth show the
+    change the stratum makes there (module docstring). Over those readings, d = r0 - r1 (the refit's change
+    of the whitened prediction) and z = d . r1 / |d|, N(0, 1) or narrower under the claim; the check fails
+    when z < Phi^-1(alpha) (one-sided, the diagnosis' level) where the readings could tell, |d| at least
+    that quantile's size."""
+    try:
+        r0 = np.asarray(base.evaluate(np.asarray(p_base, float)).r, float)
+        r1 = np.asarray(ext.evaluate(np.asarray(p_ext, float)).r, float)
+        values = ext.values(np.asarray(p_ext, float))
+    except Exception as exc:  # noqa: BLE001 - a check that cannot run does not pass
+        return Check("boundary-seen", False, f"the readings at the boundary could not be scored ({exc})", {"error": True})
+    rows = np.zeros(len(r1), bool)
+    deepest = 0.0
+    for block, sl in ext.data.block_rows():
+        rows[sl] = readings_below(block, depth)
+        deepest = max(deepest, float(np.max(-np.asarray(block.stations, float)[:, 1], initial=0.0)))
+    n = int(rows.sum())
+    d, e = (r0 - r1)[rows], r1[rows]
+    change = float(np.linalg.norm(d))
+    gain = float(r0[rows] @ r0[rows] - e @ e)
+    z = float(d @ e / change) if change > 0 else 0.0
+    need = float(special.ndtri(alpha))  # the normal quantile at alpha (negative)
+    below, above = values.get(f"E[{layer}_below]"), values.get(f"E[{layer}]")
+    kind = "stiffer" if below is None or above is None or below >= above else "softer"
+    detail = {"depth": float(depth), "readings_below": n, "deepest_reading": deepest, "below_gain": gain,
+              "gain": float(r0 @ r0 - r1 @ r1), "change_below": change, "z": z, "needed": need,
+              "testable": bool(n and change >= -need), "p_value": float(special.ndtr(z))}
+    seen = not (detail["testable"] and z < need)
+    where = f"the {n} reading{'s' if n != 1 else ''} at or below the boundary ({depth:.3g} m)"
+    if n == 0:
+        text = (f"no reading is taken at or below the boundary ({depth:.3g} m; the deepest at {deepest:.3g} m): the "
+                f"claim rests on readings above it, which a ground that differs near the opening changes as well; "
+                f"an instrument reaching below {depth:.3g} m would test it")
+    elif not detail["testable"]:
+        text = (f"{where} move by {change:.2g} σ with it (whitened), less than {-need:.3g}: they cannot tell its "
+                f"change from noise; the claim rests on readings above it")
+    elif seen:
+        text = f"{where} agree with the change the {kind} stratum makes there (z = {z:.2f}, at least {need:.2f})"
+    else:
+        text = (f"{where} do not follow the change the {kind} stratum makes there: it moves them by {change:.2g} σ "
+                f"(whitened) and they stay on the side of the model without it (z = {z:.2f} < {need:.2f}, one-sided "
+                f"at {alpha:g}; their J {'higher' if gain < 0 else 'lower'} by {abs(gain):.3g} with it); its "
+                f"improvement comes from the readings above it, which a ground that differs near the opening changes "
+                f"as well")
+    return Check("boundary-seen", seen, text, detail)
+
+
+def readings_below(block, depth: float) -> np.ndarray:
+    """Per reading of an instrument block: whether it is taken at or below `depth` (m, positive down). A
+    linewise instrument's reading at its station; any other's where a point it reads lies (any of them)."""
+    if block.lengths is not None:
+        return -np.asarray(block.stations, float)[:, 1] >= depth
+    deep = -np.asarray(block.points, float)[:, 1] >= depth
+    return (np.abs(np.asarray(block.weights, float)).sum(axis=2) > 0) @ deep > 0
 
 
 def final_determined(s, open_ends) -> Check | None:

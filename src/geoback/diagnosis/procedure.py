@@ -392,7 +392,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
         if rnd.accepted is None:
             rnd.adequate = chi2_ok and scales_ok  # nothing in the library does better
             break
-        _claim_checks(rnd, current, cur_fit, say)
+        _claim_checks(rnd, current, cur_fit, alpha, say)
         accepted.append(rnd.accepted)
         current, cur_fit, cur_rel = rnd.accepted.misfit, rnd.accepted.refit, rnd.accepted.reliability
         if rnd.accepted.hypothesis.kind == "yielding":  # its strength without the angles assumed (yielding.py)
@@ -476,7 +476,7 @@ def _excluded(exclude) -> frozenset:
     return out
 
 
-def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, say) -> None:
+def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, alpha: float, say) -> None:
     """The accepted hypothesis of a round tested as a claim (``claims.py``): determined and off its
     bounds, predicting each instrument left out better than the model without it, no rival of another
     family within the evidence (listed with the readings that separate them). Residual structure is
@@ -492,6 +492,9 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, say) -> None:
         acc.checks["instrument-alone"] = claims.instrument_alone(acc.misfit, acc.refit.p, alone)
     if acc.hypothesis.kind == "yielding":  # the readings that see the plastic zone improve with it
         acc.checks["plastic-zone"] = claims.zone_seen(current, cur_fit.p, acc.misfit, acc.refit.p)
+    if acc.hypothesis.kind == "layer-boundary" and acc.profile is not None:  # the readings below it show it
+        acc.checks["boundary-seen"] = claims.boundary_seen(current, cur_fit.p, acc.misfit, acc.refit.p,
+                                                           acc.profile.layer, acc.profile.z_hat, alpha)
     near = claims.rivals(acc, [s for s in rnd.ranking if s.refit is not None])
     if near:
         say(f"claim checks of its rivals: {', '.join(s.hypothesis.title for s in near)}")
