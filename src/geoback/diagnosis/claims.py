@@ -518,14 +518,19 @@ def zone_seen(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarray,
     return Check("plastic-zone", seen, text, detail)
 
 
-def readings_near(block, centre, reach: float) -> np.ndarray:
-    """Per reading of an instrument block: whether it is taken within `reach` of `centre`. A linewise
-    instrument's reading at its station; any other's where a point it reads lies (a convergence chord
-    between two wall points: near when either end is; a point's components: each where the point is)."""
+def readings_where(block, inside) -> np.ndarray:
+    """Per reading of an instrument block: whether it is taken where `inside` (points (n, 2) -> (n,) bool)
+    holds. A linewise instrument's reading at its station (not at the reference end every reading shares);
+    any other's where a point it reads lies (a convergence chord between two wall points: where either end
+    is; a point's components: each where the point is)."""
     if block.lengths is not None:
-        return np.hypot(*(np.asarray(block.stations, float) - np.asarray(centre, float)).T) < reach
-    near = np.hypot(*(np.asarray(block.points, float) - np.asarray(centre, float)).T) < reach
-    return (np.abs(np.asarray(block.weights, float)).sum(axis=2) > 0) @ near > 0
+        return inside(np.asarray(block.stations, float))
+    return (np.abs(np.asarray(block.weights, float)).sum(axis=2) > 0) @ inside(np.asarray(block.points, float)) > 0
+
+
+def readings_near(block, centre, reach: float) -> np.ndarray:
+    """Per reading: whether it is taken within `reach` of `centre` (``readings_where``)."""
+    return readings_where(block, lambda xy: np.hypot(*(xy - np.asarray(centre, float)).T) < reach)
 
 
 def boundary_seen(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarray, layer: str, depth: float,
@@ -578,12 +583,8 @@ def boundary_seen(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarr
 
 
 def readings_below(block, depth: float) -> np.ndarray:
-    """Per reading of an instrument block: whether it is taken at or below `depth` (m, positive down). A
-    linewise instrument's reading at its station; any other's where a point it reads lies (any of them)."""
-    if block.lengths is not None:
-        return -np.asarray(block.stations, float)[:, 1] >= depth
-    deep = -np.asarray(block.points, float)[:, 1] >= depth
-    return (np.abs(np.asarray(block.weights, float)).sum(axis=2) > 0) @ deep > 0
+    """Per reading: whether it is taken at or below `depth` (m, positive down; ``readings_where``)."""
+    return readings_where(block, lambda xy: -xy[:, 1] >= depth)
 
 
 def final_determined(s, open_ends) -> Check | None:
