@@ -570,8 +570,8 @@ def test_the_readings_below_a_boundary_are_scored_along_the_change_it_makes_ther
     assert told.passed and told.detail["testable"] and told.detail["readings_below"] == 2
     assert told.detail["z"] == pytest.approx((1.9 * 0.1 - 2.1 * 0.1) / np.hypot(1.9, 2.1))
     assert "agree with the change the stiffer stratum makes" in told.text
-    contradicted = check([3.0, 1.0, 0.1, -0.1], [0.1, -0.1, -1.9, -2.1])  # the base fitted the readings below
-    assert not contradicted.passed and contradicted.detail["z"] == pytest.approx(-np.hypot(1.9, 2.1) + 0.0, abs=0.2)
+    contradicted = check([3.0, 1.0, 0.1, -0.1], [0.1, -0.1, -1.9, -2.1])  # the base fitted them: d = (2, 2)
+    assert not contradicted.passed and contradicted.detail["z"] == pytest.approx((-2 * 1.9 - 2 * 2.1) / np.hypot(2, 2))
     assert contradicted.detail["below_gain"] < 0 and "do not follow the change" in contradicted.text
     faint = check([3.0, 1.0, -0.3, -0.5], [0.1, -0.1, -0.9, -0.9])  # |d| = 0.72: too small to tell
     assert faint.passed and not faint.detail["testable"] and "cannot tell" in faint.text
