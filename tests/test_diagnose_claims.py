@@ -272,10 +272,13 @@ def test_a_cause_that_leaves_the_model_inadequate_is_not_named():
     assert first.checks["adequacy"].detail["chi2"] == pytest.approx(rel.chi2)
     assert all(s.grade == "explained" for s in d.accepted) and d.grade == "explained"
     deep = [s for s in d.accepted[1:] if s.hypothesis.kind == "layer-boundary"]  # a second stratum below 35 m
-    for s in deep:  # (check 8: below every reading, nothing to test it; said so, with the depth to reach)
-        seen = s.checks["boundary-seen"]
-        assert seen.passed and seen.detail["readings_below"] == 0
-        assert f"an instrument reaching below {seen.detail['depth']:.3g} m would test it" in seen.text
+    assert deep
+    for s in deep:  # (check 8: below the inclinometers' toes at 30 m, but its 95 % interval reaches up within them:
+        seen = s.checks["boundary-seen"]  # nothing to test it with, said so with the depth to reach)
+        assert seen.passed and seen.detail["readings_below"] == 0 and seen.detail["reached"]
+        assert seen.detail["reach"] == pytest.approx(30.0) and seen.detail["depth"] > 30.0
+        assert "the instruments reach 30 m, I1's reference end, and its 95 % interval reaches up to" in seen.text
+        assert f"an instrument reading below {seen.detail['depth']:.3g} m would test it" in seen.text
     js = diagnosis_json(d)
     assert js["grade"] == "explained but not singled out"
     assert js["missing"][0]["checks"]["adequacy"]["passed"] is False
@@ -557,14 +560,14 @@ def test_the_readings_below_a_boundary_are_scored_along_the_change_it_makes_ther
 
     pts = np.array([[5.0, -4.0], [5.0, -8.0], [5.0, -12.0], [5.0, -16.0]])
     block = SimpleNamespace(lengths=None, points=pts, weights=np.eye(4)[:, :, None] * np.array([1.0, 0.0]),
-                            stations=pts)
+                            stations=pts, name="S1")
     data = SimpleNamespace(block_rows=lambda: [(block, slice(0, 4))])
 
-    def check(r0, r1, depth=10.0):
+    def check(r0, r1, depth=10.0, shallowest=None):
         base = SimpleNamespace(evaluate=lambda p: SimpleNamespace(r=np.asarray(r0, float)))
         ext = SimpleNamespace(evaluate=lambda p: SimpleNamespace(r=np.asarray(r1, float)), data=data,
                               values=lambda p: {"E[clay]": 10.0, "E[clay_below]": 25.0})
-        return boundary_seen(base, np.zeros(1), ext, np.zeros(1), "clay", depth, 0.05)
+        return boundary_seen(base, np.zeros(1), ext, np.zeros(1), "clay", depth, 0.05, shallowest)
 
     told = check([3.0, 1.0, 2.0, 2.0], [0.1, -0.1, 0.1, -0.1])  # below: d = (1.9, 2.1), r1 across it
     assert told.passed and told.detail["testable"] and told.detail["readings_below"] == 2
@@ -575,25 +578,41 @@ def test_the_readings_below_a_boundary_are_scored_along_the_change_it_makes_ther
     assert contradicted.detail["below_gain"] < 0 and "do not follow the change" in contradicted.text
     faint = check([3.0, 1.0, -0.3, -0.5], [0.1, -0.1, -0.9, -0.9])  # |d| = 0.72: too small to tell
     assert faint.passed and not faint.detail["testable"] and "cannot tell" in faint.text
+    # nothing read below 20 m, and the deepest point read at 16 m: the boundary is beyond every instrument's reach
     none = check([3.0, 1.0, 2.0, 2.0], [0.1, -0.1, 0.1, -0.1], depth=20.0)
-    assert none.passed and none.detail["readings_below"] == 0 and none.detail["deepest_reading"] == 16.0
+    assert not none.passed and none.detail["readings_below"] == 0 and none.detail["deepest_reading"] == 16.0
+    assert none.detail["reach"] == 16.0 and not none.detail["reached"]
+    assert "no instrument reaches the boundary" in none.text and "(16 m, S1's deepest point)" in none.text
     assert "an instrument reaching below 20 m would test it" in none.text
+    # ... its 95 % interval reaching up to 17 m: still beyond; up to 14 m: within reach, nothing to test it with
+    assert not check([3.0, 1.0, 2.0, 2.0], [0.1, -0.1, 0.1, -0.1], 20.0, 17.0).passed
+    within = check([3.0, 1.0, 2.0, 2.0], [0.1, -0.1, 0.1, -0.1], 20.0, 14.0)
+    assert within.passed and within.detail["reached"] and within.detail["readings_below"] == 0
+    assert "wholly below the boundary (20 m; the instruments reach 16 m, S1's deepest point, and its 95 % interval " \
+           "reaches up to 14 m)" in within.text
+    assert "95 % from 17 m" in check([3.0, 1.0, 2.0, 2.0], [0.1, -0.1, 0.1, -0.1], 20.0, 17.0).text
 
 
 def test_readings_below_a_depth_are_located_where_they_are_taken():
-    """Check 8's readings at or below a boundary: a linewise instrument's readings at their stations (not at the
-    reference end every reading of an inclinometer shares), a point instrument's where its points are."""
-    from geoback.diagnosis.claims import readings_below
+    """Check 8's readings at or below a boundary: a linewise instrument's rows whose whole interval lies there (a
+    row reads between its station and the one before it toward the reference end), a point instrument's where its
+    points are; how deep an instrument reaches: an inclinometer fixed at its toe to the toe, one fixed at its head
+    to its lowest station."""
+    from geoback.diagnosis.claims import reach, readings_below
 
-    pts = np.array([[5.0, -2.0], [5.0, -6.0], [5.0, -10.0], [5.0, -14.0]])  # the last: the toe, reference end
-    w = np.zeros((3, 4, 2))
-    for i in range(3):
-        w[i, i, 0], w[i, 3, 0] = 1.0, -1.0  # each reading relative to the toe
+    pts = np.array([[5.0, -10.0], [5.0, -6.0], [5.0, -2.0]])  # stations counted up from the toe, at 14 m
     labels = [SimpleNamespace(station=i + 1) for i in range(3)]
-    incl = SimpleNamespace(lengths=np.ones(3), points=pts, weights=w, labels=labels,
-                           stations=pts[:3])
-    assert readings_below(incl, 6.0).tolist() == [False, True, True]
-    assert readings_below(incl, 12.0).tolist() == [False, False, False]  # the toe alone is below: no reading
+    incl = SimpleNamespace(lengths=np.full(3, 4.0), points=pts, labels=labels, stations=pts,
+                           reference=np.array([5.0, -14.0]))
+    # a row reads the increment from the station before it (toward the toe) to its own, below it: the lowest 10-14 m
+    assert readings_below(incl, 7.0).tolist() == [True, False, False]
+    assert readings_below(incl, 12.0).tolist() == [False, False, False]  # the lowest row crosses 12 m
+    assert reach(incl) == (14.0, "reference end")
+    head = SimpleNamespace(**{**vars(incl), "points": pts[::-1], "stations": pts[::-1],
+                              "reference": np.array([5.0, 0.0])})  # fixed at its head: rows above their stations
+    assert reach(head) == (10.0, "deepest station")
+    assert readings_below(head, 5.0).tolist() == [False, False, True]  # 6-10 m
+    assert readings_below(head, 7.0).tolist() == [False, False, False]  # crossed by the row 6-10 m
     surface = SimpleNamespace(lengths=None, points=np.array([[0.0, 0.0], [8.0, -12.0]]),
                               weights=np.array([[[0.0, 1.0], [0.0, 0.0]], [[0.0, 0.0], [0.0, 1.0]]]))
     assert readings_below(surface, 10.0).tolist() == [False, True]

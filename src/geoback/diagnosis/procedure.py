@@ -494,7 +494,8 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, alpha: float, say) 
         acc.checks["plastic-zone"] = claims.zone_seen(current, cur_fit.p, acc.misfit, acc.refit.p)
     if acc.hypothesis.kind == "layer-boundary" and acc.profile is not None:  # the readings below it show it
         acc.checks["boundary-seen"] = claims.boundary_seen(current, cur_fit.p, acc.misfit, acc.refit.p,
-                                                           acc.profile.layer, acc.profile.z_hat, alpha)
+                                                           acc.profile.layer, acc.profile.z_hat, alpha,
+                                                           acc.profile.low if acc.profile.has_interval else None)
     near = claims.rivals(acc, [s for s in rnd.ranking if s.refit is not None])
     if near:
         say(f"claim checks of its rivals: {', '.join(s.hypothesis.title for s in near)}")
