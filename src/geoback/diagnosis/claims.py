@@ -571,8 +571,9 @@ def boundary_seen(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarr
     for block, sl in ext.data.block_rows():
         rows[sl] = readings_below(block, depth)
         deepest = max(deepest, float(np.max(-np.asarray(block.stations, float)[:, 1], initial=0.0)))
-        if reach(block)[0] > far:
-            far, by = reach(block)[0], f"{block.name}'s {reach(block)[1]}"
+        down, what = reach(block)
+        if down > far:
+            far, by = down, f"{block.name}'s {what}"
     top = depth if shallowest is None or not np.isfinite(shallowest) else min(float(shallowest), depth)
     n = int(rows.sum())
     d, e = (r0 - r1)[rows], r1[rows]
