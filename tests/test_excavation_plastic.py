@@ -36,6 +36,7 @@ from geoback.physics.excavation import ExcavationSimulation
 from geoback.physics.excavation_plastic import YieldingExcavationSimulation
 from geoback.physics.factory import make_simulation
 from geoback.physics.plasticity import DeepTunnelMC
+from geoback.physics.plastic import PROBE_TOL
 
 @pytest.fixture(scope="module", autouse=True)
 def geoback_cache(tmp_path_factory):
@@ -416,7 +417,8 @@ def test_a_run_near_the_last_starts_from_it_carried_by_its_sensitivities():
     """Issue 22: a run at values near the last run with sensitivities starts each increment from that run
     carried to first order (u + du/dp dp), not from its solution as it was: the same readings (to the
     Newton tolerance) for fewer factorisations, on every stage of a heading and bench that yields.
-    (Readings-only runs, as probes: a fit's trial point would also compute its sensitivities.)"""
+    (Readings-only runs, as probes: a fit's trial point would also compute its sensitivities. A probe's
+    Newton tolerance is plastic.PROBE_TOL.)"""
     sim = simulation(heading_bench(STAGED))
     values = sim.quantities()
     names = ["E[marl]", "K0", "c[marl]", "phi[marl]"]
@@ -437,7 +439,8 @@ def test_a_run_near_the_last_starts_from_it_carried_by_its_sensitivities():
     cold = simulation(heading_bench(STAGED), mesh=sim.mesh)
     x_cold, from_scratch = readings(cold, near)
     scale = np.abs(x_cold).max()
-    assert np.abs(x_carried - x_cold).max() <= 1e-8 * scale and np.abs(x_plain - x_cold).max() <= 1e-8 * scale
+    assert np.abs(x_carried - x_cold).max() <= 10 * PROBE_TOL * scale
+    assert np.abs(x_plain - x_cold).max() <= 10 * PROBE_TOL * scale
     assert carried < as_it_was < from_scratch, (carried, as_it_was, from_scratch)  # measured: 40, 49, 75
 
 

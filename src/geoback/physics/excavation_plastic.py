@@ -63,7 +63,7 @@ derivatives (material per element, sigma_0, gamma, beta, the lining's E and nu) 
 of the case-to-inputs map each (exact to rounding). The result is the exact derivative of the
 discrete solution for the increments used: finite differences must replay them (``replaying``).
 
-Increments, warm starts, progress and the time limit are those of ``plastic.py``: a fixed schedule of
+Increments, warm starts, progress, probes and the time limit are those of ``plastic.py``: a fixed schedule of
 ``INCREMENTS`` per unit of the largest fraction a stage releases (at least ``MIN_STAGE``), a failed
 increment halved, each increment's Newton iteration started from the last run with sensitivities
 carried to the new values to first order (its solution of the increment plus du/dp dp: ``Runs.predicted``;
@@ -189,6 +189,7 @@ class _Run:
     # such runs converge to the sensitivities (across a change of branch they pick up a kink)
     e_ref: np.ndarray = None  # each prop's or anchor's shortening / elongation when it was locked
     de_ref: np.ndarray = None
+    probe: bool = False  # solved to plastic.PROBE_TOL only (plastic.Runs): not reused outside a probe
 
     @property
     def wrt(self) -> tuple:
@@ -439,7 +440,8 @@ class YieldingExcavationSimulation(ExcavationSimulation):
             try:
                 with one_thread(self._pardiso):
                     res = solve(fe, material, state["sigma"][pts], g[dofs], [1.0], derivatives=derivs,
-                                options=replace(self.options, schedule=(schedule[key],)), operators=ops_k,
+                                options=replace(self._runs.options(self.options, names), schedule=(schedule[key],)),
+                                operators=ops_k,
                                 warm={i: u for (k_, i), u in warm.items() if k_ == key} or None, observer=observer,
                                 f_before=before[dofs], springs=springs,
                                 region=self._region(key, ops_k))
