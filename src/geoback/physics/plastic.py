@@ -47,8 +47,7 @@ mesh) is a question answered far coarser than Newton's tolerance: whether J rise
 factor of two, or a difference of readings against 0.3 sigma. Its increments stop at ``PROBE_TOL``
 (``Runs.options``); on ``cases/plastic-tunnel.yaml`` the probes' J moved by less than 2e-6 from
 their values at 1e-10 (1e-5 gave 2e-5); the probes factorised 72 tangents instead of 100, the
-finer mesh's run 17 instead of 20. A probe's run is
-not reused outside a probe.
+finer mesh's run 17 instead of 20. A probe's run is not reused outside a probe.
 
 Composition: the case's ``Domain`` (``domain.py``), the quadrature-point operators, and the last runs
 with their warm start (``Runs``), shared with views on other instruments (``Simulation.surveying``:
