@@ -414,6 +414,13 @@ def _leave_out_problem(bench, tmp_path, seed: int, index: int, kind: str):
     return bench.truth_readings(spec, str(tmp_path))[2]
 
 
+def _leave_out_diagnosis(bench, tmp_path, monkeypatch, seed: int, index: int, kind: str):
+    """That case diagnosed with its truth's family left out of the library, as the benchmark does."""
+    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
+    problem = _leave_out_problem(bench, tmp_path, seed, index, kind)
+    return diagnose(problem, exclude=sorted(bench.left_out(kind)))
+
+
 @pytest.mark.slow
 def test_a_yielding_zone_standing_in_for_a_stratum_is_not_named(bench, tmp_path, monkeypatch):
     """The leave-one-family-out benchmark's bench-027 (seed 2024): a stiffer stratum 2.1 m below the invert
@@ -421,9 +428,7 @@ def test_a_yielding_zone_standing_in_for_a_stratum_is_not_named(bench, tmp_path,
     every check of its round passed, the final model adequate), the refit making the ground 2.3x stiffer
     away from a wide plastic zone. Its strength's 95 % profile interval in the final joint fit runs down to
     the search bound: the readings do not bound it, so it is not determined and not named (about 30 s)."""
-    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
-    problem = _leave_out_problem(bench, tmp_path, 2024, 27, "layer-boundary")
-    d = diagnose(problem, exclude=sorted(bench.left_out("layer-boundary")))
+    d = _leave_out_diagnosis(bench, tmp_path, monkeypatch, 2024, 27, "layer-boundary")
     acc = d.accepted[0]
     assert acc.hypothesis.kind == "yielding" and d.adequate_after
     assert d.open_ends("c[clay]")[0]
@@ -484,9 +489,7 @@ def test_a_yielding_zone_the_near_readings_do_not_see_is_not_named(bench, tmp_pa
     the opening improve by 1.8: no plastic zone the readings saw. Explained but not singled out."""
     from geoback.diagnosis.claims import NEAR_ZONE
 
-    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
-    problem = _leave_out_problem(bench, tmp_path, 2025, 8, "stiffness-gradient")
-    d = diagnose(problem, exclude=sorted(bench.left_out("stiffness-gradient")))
+    d = _leave_out_diagnosis(bench, tmp_path, monkeypatch, 2025, 8, "stiffness-gradient")
     acc = d.accepted[0]
     assert acc.hypothesis.kind == "yielding" and d.adequate_after
     zone = acc.checks["plastic-zone"]
@@ -535,9 +538,7 @@ def test_a_stratum_the_readings_below_it_do_not_show_is_not_named(bench, tmp_pat
     passed. The six inclinometer readings below that depth lie on the side of the model without the stratum
     (z = -1.72; their J rises by 2.9 with it) while the stratum moves them by 1.9 sigma: its gain (76) came
     from the readings above. Explained but not singled out, in words."""
-    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
-    problem = _leave_out_problem(bench, tmp_path, 2029, 4, "anisotropy")
-    d = diagnose(problem, exclude=sorted(bench.left_out("anisotropy")))
+    d = _leave_out_diagnosis(bench, tmp_path, monkeypatch, 2029, 4, "anisotropy")
     acc = d.accepted[0]
     assert acc.hypothesis.kind == "layer-boundary"
     seen = acc.checks["boundary-seen"]
@@ -648,9 +649,7 @@ def test_a_cause_whose_gain_rests_on_a_prior_is_not_named(bench, tmp_path, monke
     Its gain came from the prior on E: the readings put E 3.6 sigma above it, and a gradient stiffens the
     response while E at the top stays at the prior. With the prior left out, the readings alone improve by
     less than chi^2(1) at 1 % with it: explained but not singled out, in words."""
-    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
-    problem = _leave_out_problem(bench, tmp_path, 2027, 9, "stress-release")
-    d = diagnose(problem, exclude=sorted(bench.left_out("stress-release")))
+    d = _leave_out_diagnosis(bench, tmp_path, monkeypatch, 2027, 9, "stress-release")
     acc = d.accepted[0]
     assert acc.hypothesis.kind == "stiffness-gradient" and d.adequate_after
     c = acc.checks["prior-support"]

@@ -150,7 +150,7 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    code path without the check), full library, seeds 2024-2031, 16 with effect > 3 sigma: named right
    6 -> 12, none named wrong (rivals dismissed: a stratum under nearly the whole layer, a modulus gradient,
    the extensometer's anchor); diagnosed without the release families, seeds 2024-2035, 43 with effect
-   > 3 sigma: confident wrong causes MAIN_LO -> 1 (modulus gradients, strata below 1-3 m and an anisotropy:
+   > 3 sigma: confident wrong causes 6 -> 1 (modulus gradients, strata below 1-6 m and an anisotropy:
    Delta J_alone 0.7 to 5.5 on 1 dof). At 5 % the same runs gave 11 named right and 3 confident wrong.
    Not caught: 2032 bench-011, a stratum below 1.3 m whose shape the readings alone support.
 """
