@@ -414,6 +414,13 @@ def _leave_out_problem(bench, tmp_path, seed: int, index: int, kind: str):
     return bench.truth_readings(spec, str(tmp_path))[2]
 
 
+def _leave_out_diagnosis(bench, tmp_path, monkeypatch, seed: int, index: int, kind: str):
+    """That case diagnosed with its truth's family left out of the library, as the benchmark does."""
+    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
+    problem = _leave_out_problem(bench, tmp_path, seed, index, kind)
+    return diagnose(problem, exclude=sorted(bench.left_out(kind)))
+
+
 @pytest.mark.slow
 def test_a_yielding_zone_standing_in_for_a_stratum_is_not_named(bench, tmp_path, monkeypatch):
     """The leave-one-family-out benchmark's bench-027 (seed 2024): a stiffer stratum 2.1 m below the invert
@@ -421,9 +428,7 @@ def test_a_yielding_zone_standing_in_for_a_stratum_is_not_named(bench, tmp_path,
     every check of its round passed, the final model adequate), the refit making the ground 2.3x stiffer
     away from a wide plastic zone. Its strength's 95 % profile interval in the final joint fit runs down to
     the search bound: the readings do not bound it, so it is not determined and not named (about 30 s)."""
-    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
-    problem = _leave_out_problem(bench, tmp_path, 2024, 27, "layer-boundary")
-    d = diagnose(problem, exclude=sorted(bench.left_out("layer-boundary")))
+    d = _leave_out_diagnosis(bench, tmp_path, monkeypatch, 2024, 27, "layer-boundary")
     acc = d.accepted[0]
     assert acc.hypothesis.kind == "yielding" and d.adequate_after
     assert d.open_ends("c[clay]")[0]
@@ -484,9 +489,7 @@ def test_a_yielding_zone_the_near_readings_do_not_see_is_not_named(bench, tmp_pa
     the opening improve by 1.8: no plastic zone the readings saw. Explained but not singled out."""
     from geoback.diagnosis.claims import NEAR_ZONE
 
-    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
-    problem = _leave_out_problem(bench, tmp_path, 2025, 8, "stiffness-gradient")
-    d = diagnose(problem, exclude=sorted(bench.left_out("stiffness-gradient")))
+    d = _leave_out_diagnosis(bench, tmp_path, monkeypatch, 2025, 8, "stiffness-gradient")
     acc = d.accepted[0]
     assert acc.hypothesis.kind == "yielding" and d.adequate_after
     zone = acc.checks["plastic-zone"]
@@ -535,9 +538,7 @@ def test_a_stratum_the_readings_below_it_do_not_show_is_not_named(bench, tmp_pat
     passed. The six inclinometer readings below that depth lie on the side of the model without the stratum
     (z = -1.72; their J rises by 2.9 with it) while the stratum moves them by 1.9 sigma: its gain (76) came
     from the readings above. Explained but not singled out, in words."""
-    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
-    problem = _leave_out_problem(bench, tmp_path, 2029, 4, "anisotropy")
-    d = diagnose(problem, exclude=sorted(bench.left_out("anisotropy")))
+    d = _leave_out_diagnosis(bench, tmp_path, monkeypatch, 2029, 4, "anisotropy")
     acc = d.accepted[0]
     assert acc.hypothesis.kind == "layer-boundary"
     seen = acc.checks["boundary-seen"]
@@ -616,3 +617,64 @@ def test_readings_below_a_depth_are_located_where_they_are_taken():
     surface = SimpleNamespace(lengths=None, points=np.array([[0.0, 0.0], [8.0, -12.0]]),
                               weights=np.array([[[0.0, 1.0], [0.0, 0.0]], [[0.0, 0.0], [0.0, 1.0]]]))
     assert readings_below(surface, 10.0).tolist() == [False, True]
+
+
+def test_the_readings_alone_are_fitted_as_the_fit_without_priors_fits_them(bench, tmp_path, monkeypatch):
+    """Check 9's fit to the readings alone (``_readings_alone``: Gauss-Newton steps with the prior rows left
+    out) reaches the minimum the project's own fit finds for the same misfit without its priors, and counts
+    the directions the readings inform. The case: the leave-one-family-out benchmark's bench-009 of seed 2027,
+    a one-step tunnel with a prior on E (5 %) whose truth released 83 % of the stress."""
+    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
+    from dataclasses import replace
+
+    from geoback.diagnosis.claims import _readings_alone
+    from geoback.inference.estimate import fit
+
+    problem = _leave_out_problem(bench, tmp_path, 2027, 9, "stress-release")
+    misfit = problem.misfit
+    params = misfit.parameters
+    assert params.has_prior.tolist() == [n.startswith("E[") for n in params.names]
+    with_prior = fit(misfit)
+    nan = np.full(params.n, np.nan)
+    alone = fit(replace(misfit, parameters=replace(params, prior_mean=nan, prior_std=nan)), p0=with_prior.p)
+    J, rank = _readings_alone(misfit, with_prior.p)
+    assert rank == params.n
+    assert J == pytest.approx(alone.J, rel=1e-6)
+    assert J < with_prior.J - 5  # the prior pulls: 3.6 sigma from the readings' E
+
+
+def test_a_cause_whose_gain_rests_on_a_prior_is_not_named(bench, tmp_path, monkeypatch):
+    """Check 9 (``prior_support``): the same case diagnosed without the release families was named 'a modulus
+    of clay increasing with depth' (Egrad = 0.53 MPa/m, every other check passed, the final model adequate).
+    Its gain came from the prior on E: the readings put E 3.6 sigma above it, and a gradient stiffens the
+    response while E at the top stays at the prior. With the prior left out, the readings alone improve by
+    less than chi^2(1) at 1 % with it: explained but not singled out, in words."""
+    d = _leave_out_diagnosis(bench, tmp_path, monkeypatch, 2027, 9, "stress-release")
+    acc = d.accepted[0]
+    assert acc.hypothesis.kind == "stiffness-gradient" and d.adequate_after
+    c = acc.checks["prior-support"]
+    assert not c.passed and c.detail["dof"] == 1 and c.detail["gain"] < 1.0 and c.detail["level"] == 0.01
+    assert c.detail["p_value"] > 0.3  # 0.72 on 1 dof
+    assert "rests on the priors on E[clay]" in c.text
+    assert all(ch.passed for k, ch in acc.checks.items() if k != "prior-support")  # the only check it fails
+    assert acc.grade == "explained" and d.grade == "explained"
+
+
+def test_a_release_whose_effect_is_that_of_a_prior_parameter_rests_on_the_prior(bench, tmp_path, monkeypatch):
+    """Check 9 on true releases, full library: the benchmark's bench-009 of seed 2031 (beta = 0.70, 7.5 sigma,
+    a prior on E). The release has the modulus' effect on the readings, so the readings alone cannot test
+    it (no dimension added): it passes, saying it rests on the prior. Its rival, a stratum below 1.4 m (the
+    whole layer stiffer, 0.2 AIC behind), fails the check - its gain too is the prior's - and no longer
+    keeps the release from being named (it was 'explained but not singled out' before the check)."""
+    monkeypatch.setenv("GEOBACK_CACHE", str(tmp_path / "cache"))
+    spec = bench.random_case(9, "stress-release", 2031)
+    problem = bench.truth_readings(spec, str(tmp_path))[2]
+    d = diagnose(problem)
+    acc = d.accepted[0]
+    assert acc.hypothesis.kind == "stress-release"
+    c = acc.checks["prior-support"]
+    assert c.passed and c.detail["dof"] == 0 and c.detail["applicable"] is False
+    assert "rests on the priors as the case states them" in c.text
+    dismissed = acc.checks["rivals"].detail["dismissed"]
+    assert any(k.startswith("layer-boundary[") for k in dismissed)
+    assert acc.grade == "named"

@@ -502,6 +502,10 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, alpha: float, say) 
     if alone is not None:  # an error of one instrument: every other reading explained without it
         say(f"claim checks of {acc.hypothesis.title}: an error of {alone} alone")
         acc.checks["instrument-alone"] = claims.instrument_alone(acc.misfit, acc.refit.p, alone)
+    backed = claims.prior_support(current, cur_fit.p, acc.misfit, acc.refit.p)
+    if backed is not None:  # where the model has priors: the readings alone call for it
+        say(f"claim checks of {acc.hypothesis.title}: the readings alone, the priors left out")
+        acc.checks["prior-support"] = backed
     if acc.hypothesis.kind == "yielding":  # the readings that see the plastic zone improve with it
         acc.checks["plastic-zone"] = claims.zone_seen(current, cur_fit.p, acc.misfit, acc.refit.p)
     if acc.hypothesis.kind == "layer-boundary" and acc.profile is not None:  # the readings below it show it
