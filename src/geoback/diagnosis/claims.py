@@ -150,9 +150,11 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    code path without the check), full library, seeds 2024-2031, 16 with effect > 3 sigma: named right
    6 -> 12, none named wrong (rivals dismissed: a stratum under nearly the whole layer, a modulus gradient,
    the extensometer's anchor); diagnosed without the release families, seeds 2024-2035, 43 with effect
-   > 3 sigma: confident wrong causes 6 -> 1 (modulus gradients, strata below 1-6 m and an anisotropy:
-   Delta J_alone 0.7 to 5.5 on 1 dof). At 5 % the same runs gave 11 named right and 3 confident wrong.
-   Not caught: 2032 bench-011, a stratum below 1.3 m whose shape the readings alone support.
+   > 3 sigma: confident wrong causes 6 -> 1 (three modulus gradients and strata below 2.8 and 5.6 m; Delta
+   J_alone 0.72 on 1 dof for 2027 bench-009, 5.5 for 2030 bench-015). At 5 % the same runs gave 11 named
+   right and 3 confident wrong (2030 bench-015's stratum passed, and a rival dismissed let an anisotropy
+   be named for 2033 bench-025). Not caught: 2032 bench-011, a stratum below 1.3 m whose shape the
+   readings alone support.
 """
 from __future__ import annotations
 
