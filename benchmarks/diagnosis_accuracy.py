@@ -974,7 +974,10 @@ def main(argv: list[str] | None = None) -> int:
     os.environ["GEOBACK_CACHE"] = str(cache)  # inherited by the workers
     if args.show is not None:
         try:
-            r = run_one(make_specs(args, seeds[0])[args.show], str(work), show=True)
+            specs = [sp for sp in make_specs(args, seeds[0]) if sp["index"] == args.show]  # by its name's number
+            if not specs:  # (a leave-out run drops the nulls: a list position is not a case's number)
+                raise SystemExit(f"--show {args.show}: no case bench-{args.show:03d} among the cases these options draw")
+            r = run_one(specs[0], str(work), show=True)
         finally:
             shutil.rmtree(work, ignore_errors=True)
         print({k: v for k, v in r.items() if v != ""})

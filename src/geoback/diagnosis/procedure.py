@@ -444,7 +444,7 @@ def diagnose(case, alpha: float = 0.05, max_rounds: int = 2, refit_top: int = 4,
     out = Diagnosis(analysis.case.name, alpha, rounds, baseline, final, current, accepted, final_profiles,
                     time.perf_counter() - t_start, intervals, analysis.loaded, method,
                     not_applicable(analysis.case), strength)
-    claims.regrade_final(accepted, out.open_ends)  # check 4 again, on the final joint fit's intervals
+    claims.regrade_final(accepted, out.open_ends, rounds, alpha)  # checks 4 and 6 again, every cause graded
     return out
 
 
