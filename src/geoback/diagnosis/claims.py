@@ -81,7 +81,9 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    stand in, with that helper, for one effect the library lacks (leave-one-family-out benchmark, seed
    2030 bench-016: an anisotropic ground named a stratum 10 % stiffer below the invert, chi^2 62.8 on 37
    dof after it, p = 0.005, made adequate by a bias shift of I1 not singled out from a modulus gradient).
-   MEASURED_ADEQUACY
+   Measured: on the leave-one-family-out benchmark it caught that case only (fresh seeds 2030-2035; the
+   development seeds 2024-2029 kept their 7 confident wrong causes of 176); on the full library (seeds
+   2033-2035, 67 cases with effect > 3 sigma) no grade changed: 33 named right, none named wrong.
 7. A plastic zone the readings see (``zone_seen``), for yielding ground: with the refit's strength, the
    readings within NEAR_ZONE = 2 equivalent radii of the opening's centre (R_eq = sqrt(R^2 + A / pi), A
    the yielded area of the last stage: robust to a stray yielded point) must improve by at least the
@@ -168,7 +170,9 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    the readings' reach, and take the conflict between them away whatever its shape: 2032 bench-011, a
    release named a stratum below 1.26 m (Delta J_alone = 8.3 on 1 dof, p = 0.004, so the shape passed),
    the readings' share of E[clay] 79 % without it and 1 % with it. A release fraction beside the modulus
-   (k = 0) keeps its rule above: the modulus still stands for the whole layer. MEASURED_SHARE
+   (k = 0) keeps its rule above: the modulus still stands for the whole layer. Measured: the leave-one-family-out
+   releases of seeds 2030-2035 went from 1 confident wrong cause of 23 to none; the full library's
+   releases (seeds 2024-2031, 16 with effect > 3 sigma) stayed at 12 named right, none named wrong.
 """
 from __future__ import annotations
 
