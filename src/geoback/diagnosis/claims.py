@@ -181,6 +181,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special
 
+from geoback.inference.linear_analysis import LinearAnalysis
 from geoback.inference.misfit import Misfit
 
 STRUCTURE_ALPHA = 0.01  # family-wise level of the residual-structure tests: a check that downgrades a cause
@@ -319,11 +320,10 @@ def readings_share(misfit: Misfit, p: np.ndarray) -> dict[str, float]:
     eqn 55; C0 the prior's own), 0 where the readings leave the prior as it was, 1 where they alone decide."""
     ev = misfit.evaluate(np.asarray(p, float), jacobian=True)
     B, m = np.asarray(ev.B, float), ev.m
-    d = np.maximum(np.linalg.norm(B, axis=0), 1e-300)  # equilibrated: the information spans many decades
-    Br, Bp = B[:m] / d, B[m:] / d
+    Bp = B[m:]
     has = np.asarray(misfit.parameters.has_prior, bool)
-    C = np.linalg.pinv(Br.T @ Br + Bp.T @ Bp)
-    C0 = np.linalg.pinv(Bp[:, has].T @ Bp[:, has])  # the prior alone, over the parameters it covers
+    C = LinearAnalysis.from_information(B.T @ B).covariance  # eqn 55: the readings' rows and the prior's
+    C0 = LinearAnalysis.from_information(Bp[:, has].T @ Bp[:, has]).covariance  # the prior alone, where it is
     names = [n for n, h in zip(misfit.parameters.names, has) if h]
     full = np.flatnonzero(has)
     return {n: float(1.0 - C[j, j] / C0[i, i]) for i, (n, j) in enumerate(zip(names, full)) if C0[i, i] > 0}
