@@ -75,8 +75,8 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    0.01, the level of the other checks: on the leave-one-family-out benchmark, seeds 2024-2029, 176
    cases with effect > 3 sigma, the confident wrong causes went from 15 to 12; on the full library 2
    of 39 true causes named became explained but not singled out.) A cause accepted before a cause that is
-   not singled out is judged instead by the model at the end of its own round (``adequacy_without``, in
-   ``regrade_final`` once every cause is graded): the final model's adequacy is then the later cause's
+   not singled out is judged instead by the model at the end of its own round (``adequacy`` given the causes
+   not singled out, in ``regrade_final`` once every cause is graded): the final model's adequacy is then the later cause's
    doing, and a cause that explains the readings only with a helper the readings do not single out may
    stand in, with that helper, for one effect the library lacks (leave-one-family-out benchmark, seed
    2030 bench-016: an anisotropic ground named a stratum 10 % stiffer below the invert, chi^2 62.8 on 37
@@ -612,19 +612,31 @@ def instrument_alone(misfit: Misfit, p: np.ndarray, instrument: str, alpha: floa
                  detail)
 
 
-def adequacy(chi2: float, dof: int, p_value: float, alpha: float) -> Check:
+def adequacy(chi2: float, dof: int, p_value: float, alpha: float, without: list = ()) -> Check:
     """Check 6: the final model, with every accepted cause, explains the readings (chi^2 test at the
-    diagnosis' level `alpha`)."""
+    diagnosis' level `alpha`). For a cause accepted before causes that are not singled out (`without`, their
+    titles): the model at the end of its own round, it and the causes accepted before it (module docstring)."""
     detail = {"chi2": chi2, "dof": dof, "p_value": p_value, "level": alpha}
+    if without:
+        detail["without"] = list(without)
     if dof <= 0 or not np.isfinite(p_value):
-        return Check("adequacy", True, "no degrees of freedom left to test the final model", {"applicable": False})
+        model = "model with it" if without else "final model"
+        return Check("adequacy", True, f"no degrees of freedom left to test the {model}", {"applicable": False})
+    fit = f"χ² {chi2:.3g} on {dof:g} dof, p = {p_value:.2g}"
+    if not without:
+        if p_value >= alpha:
+            return Check("adequacy", True, f"the final model explains the readings ({fit})", detail)
+        return Check("adequacy", False,
+                     f"the final model still does not explain the readings ({fit} < {alpha:g}): the library lacks "
+                     f"something, and an accepted cause may stand in for it", detail)
+    them, one = " and ".join(without), len(without) == 1
     if p_value >= alpha:
-        return Check("adequacy", True, f"the final model explains the readings (χ² {chi2:.3g} on {dof:g} dof, "
-                                       f"p = {p_value:.2g})", detail)
+        return Check("adequacy", True, f"the model with it explains the readings without {them}, which "
+                                       f"{'is' if one else 'are'} not singled out ({fit})", detail)
     return Check("adequacy", False,
-                 f"the final model still does not explain the readings (χ² {chi2:.3g} on {dof:g} dof, p = "
-                 f"{p_value:.2g} < {alpha:g}): the library lacks something, and an accepted cause may stand in "
-                 f"for it", detail)
+                 f"the model with it explains the readings only with {them} added, which {'is' if one else 'are'} not "
+                 f"singled out; without {'it' if one else 'them'} {fit} < {alpha:g}: the readings need more than this "
+                 f"cause, and what they need may be one effect the library lacks that it stands in for", detail)
 
 
 def determined_check(s) -> Check:
@@ -808,29 +820,10 @@ def final_determined(s, open_ends) -> Check | None:
                  {"open": {n: list(map(bool, e)) for n, e in bad.items()}})
 
 
-def adequacy_without(chi2: float, dof: int, p_value: float, alpha: float, later: list) -> Check:
-    """Check 6 for a cause accepted before causes that are not singled out (``later``, their titles): the
-    model at the end of its own round (it and the causes accepted before it) explains the readings, chi^2
-    test at `alpha` (module docstring)."""
-    them = " and ".join(later)
-    detail = {"chi2": chi2, "dof": dof, "p_value": p_value, "level": alpha, "without": list(later)}
-    if dof <= 0 or not np.isfinite(p_value):
-        return Check("adequacy", True, "no degrees of freedom left to test the model with it", {"applicable": False})
-    if p_value >= alpha:
-        return Check("adequacy", True, f"the model with it explains the readings without {them}, which "
-                                       f"{'is' if len(later) == 1 else 'are'} not singled out (χ² {chi2:.3g} on "
-                                       f"{dof:g} dof, p = {p_value:.2g})", detail)
-    return Check("adequacy", False,
-                 f"the model with it explains the readings only with {them} added, which "
-                 f"{'is' if len(later) == 1 else 'are'} not singled out; without {'it' if len(later) == 1 else 'them'} "
-                 f"χ² is {chi2:.3g} on {dof:g} dof (p = {p_value:.2g} < {alpha:g}): the readings need more than this "
-                 f"cause, and what they need may be one effect the library lacks that it stands in for", detail)
-
-
 def regrade_final(accepted: list, open_ends, rounds: list = (), alpha: float = 0.05) -> None:
     """Checks 4 and 6 again once every cause is graded, last cause first. Check 4 (``final_determined``): a
     cause whose interval in the final joint fit is open at a limit fails it; a cause accepted before others
-    only while every cause after it is named. Check 6 (``adequacy_without``): a cause accepted before a cause
+    only while every cause after it is named. Check 6 (``adequacy`` with the causes not singled out): a cause accepted before a cause
     that is not singled out is judged by the model at the end of its own round (``rounds[j + 1]`` for the
     j-th accepted cause) instead of the final one (module docstring)."""
     later_named = True
@@ -842,7 +835,7 @@ def regrade_final(accepted: list, open_ends, rounds: list = (), alpha: float = 0
         if not later_named and j + 1 < len(rounds) and "adequacy" in s.checks:
             rnd = rounds[j + 1]
             later = [t.hypothesis.title for t in accepted[j + 1:] if t.grade != "named"]
-            s.checks["adequacy"] = adequacy_without(rnd.chi2, rnd.dof, rnd.p_value, alpha, later)
+            s.checks["adequacy"] = adequacy(rnd.chi2, rnd.dof, rnd.p_value, alpha, later)
         s.grade = grade(s.checks)
         later_named = later_named and s.grade == "named"
 
