@@ -271,14 +271,14 @@ def _left_out(misfit: Misfit, p: np.ndarray, by: str = "instrument") -> dict[str
 PRIOR_STEPS = 4  # Gauss-Newton steps of the fit to the readings alone (check 9)
 
 
-def _readings_alone(misfit: Misfit, p0: np.ndarray) -> tuple[float, int]:
+def _readings_alone(misfit: Misfit, p0: np.ndarray, ev=None) -> tuple[float, int]:
     """J of the readings alone (the prior rows left out) at its minimum, reached by Gauss-Newton steps
     from p0 (a pseudo-inverse: directions the readings do not inform are not moved; halved until J
     falls; within the bounds), and the rank of the readings' scaled sensitivities at p0 (relative
-    eigenvalue above FLOOR, as check 1 counts them)."""
+    eigenvalue above FLOOR, as check 1 counts them). ev: the evaluation at p0 with its Jacobian, if made."""
     lo, hi = misfit.parameters.lower, misfit.parameters.upper
     p = np.asarray(p0, float)
-    ev = misfit.evaluate(p, jacobian=True)
+    ev = ev if ev is not None else misfit.evaluate(p, jacobian=True)
     m = ev.m
     J = float(ev.r[:m] @ ev.r[:m])
     rank = None
@@ -314,11 +314,12 @@ def _readings_alone(misfit: Misfit, p0: np.ndarray) -> tuple[float, int]:
 READINGS_SHARE = 0.5  # a parameter with a prior is the readings' when they remove at least half its prior variance
 
 
-def readings_share(misfit: Misfit, p: np.ndarray) -> dict[str, float]:
+def readings_share(misfit: Misfit, p: np.ndarray, ev=None) -> dict[str, float]:
     """Per parameter with a prior: the share of its determination that is the readings' at p, 1 - C_ii / C0_ii
     (the data-resolution diagonal: C the posterior covariance of the whitened problem with the prior rows,
-    eqn 55; C0 the prior's own), 0 where the readings leave the prior as it was, 1 where they alone decide."""
-    ev = misfit.evaluate(np.asarray(p, float), jacobian=True)
+    eqn 55; C0 the prior's own), 0 where the readings leave the prior as it was, 1 where they alone decide.
+    ev: the evaluation at p with its Jacobian, if made."""
+    ev = ev if ev is not None else misfit.evaluate(np.asarray(p, float), jacobian=True)
     B, m = np.asarray(ev.B, float), ev.m
     Bp = B[m:]
     has = np.asarray(misfit.parameters.has_prior, bool)
@@ -339,9 +340,11 @@ def prior_support(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarr
     if not has.any():
         return None
     names = ", ".join(n for n, h in zip(ext.parameters.names, has) if h)
-    try:
-        Jb, kb = _readings_alone(base, p_base)
-        Je, ke = _readings_alone(ext, p_ext)
+    try:  # (each model evaluated once at its optimum: the fit to the readings alone and the shares start there)
+        eb = base.evaluate(np.asarray(p_base, float), jacobian=True)
+        ee = ext.evaluate(np.asarray(p_ext, float), jacobian=True)
+        Jb, kb = _readings_alone(base, p_base, eb)
+        Je, ke = _readings_alone(ext, p_ext, ee)
     except Exception as exc:  # noqa: BLE001 - a check that cannot run does not pass
         return Check("prior-support", False, f"the fit to the readings alone could not be computed ({exc})",
                      {"error": True})
@@ -355,7 +358,7 @@ def prior_support(base: Misfit, p_base: np.ndarray, ext: Misfit, p_ext: np.ndarr
     pval = float(special.chdtrc(k, gain))
     detail["p_value"] = pval
     try:  # a parameter the readings decided without the cause and that only its prior decides with it
-        before, after = readings_share(base, p_base), readings_share(ext, p_ext)
+        before, after = readings_share(base, p_base, eb), readings_share(ext, p_ext, ee)
     except Exception:  # noqa: BLE001 - (the shares are a second condition: their absence fails nothing)
         before, after = {}, {}
     lost = [n for n in before if n in after and before[n] >= READINGS_SHARE > after[n]]
