@@ -502,6 +502,9 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, alpha: float, say) 
     if alone is not None:  # an error of one instrument: every other reading explained without it
         say(f"claim checks of {acc.hypothesis.title}: an error of {alone} alone")
         acc.checks["instrument-alone"] = claims.instrument_alone(acc.misfit, acc.refit.p, alone)
+    record = claims.stated_record(acc)
+    if record is not None:  # a reference end's movement against what the case states of it
+        acc.checks["installation-record"] = record
     backed = claims.prior_support(current, cur_fit.p, acc.misfit, acc.refit.p)
     if backed is not None:  # where the model has priors: the readings alone call for it
         say(f"claim checks of {acc.hypothesis.title}: the readings alone, the priors left out")
