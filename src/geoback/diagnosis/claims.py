@@ -561,9 +561,11 @@ def rival_check(acc, found: list, dismissed: list = ()) -> Check:
     if not found:
         return Check("rivals", True, f"no refit of another family that passes its own claim checks comes within "
                                      f"{RIVAL_AIC:.3g} AIC{scaled}{gone}", detail)
-    names = "; ".join(f"{s.hypothesis.title} (ΔAIC {s.aic - acc.aic:+.2g}"
-                      + (", if the case's record of its reference end is wrong" if not s.checks.get(
-                          "installation-record", Check("", True, "")).passed else "") + ")" for s in found) + scaled
+    def record(s) -> str:  # a rival against the case's record (check 10) says what it needs
+        check = s.checks.get("installation-record")
+        return ", if the case's record of its reference end is wrong" if check and not check.passed else ""
+
+    names = "; ".join(f"{s.hypothesis.title} (ΔAIC {s.aic - acc.aic:+.2g}{record(s)})" for s in found) + scaled
     return Check("rivals", False, f"another family explains the readings within the evidence: {names}{gone}",
                  {**detail, "rivals": [s.hypothesis.key for s in found]})
 
