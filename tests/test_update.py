@@ -350,3 +350,27 @@ def test_the_figures_model_line_of_an_instrument_installed_later_is_its_incremen
     computed = sim.surveying([x1]).predict(values).x
     at_stations = np.interp(np.cumsum(x1.lengths), prof.along, prof.line_reading)
     assert np.max(np.abs(at_stations - computed)) < 0.02 * np.max(np.abs(computed))
+
+
+def test_a_moved_reference_end_of_one_survey_is_a_hypothesis_of_the_dated_case():
+    """Each survey of a dated case has its own integration constants, named with their reading set
+    ('B[I1.advance@2026-03-05]'): `geoback diagnose` proposes a moved reference end for each (it stopped on
+    the parameter name's pattern before), and a case may name such a parameter, a survey's time included;
+    a name with text after its brackets is still refused."""
+    from geoback.case.schema import Parameter
+    from geoback.diagnosis.hypotheses import candidate_hypotheses
+    from geoback.inference.estimate import fit
+    from pydantic import ValidationError
+
+    a = prepare(load_case(CASE))
+    f = fit(a.misfit, a.settings)
+    moved = [h for h in candidate_hypotheses(a.misfit, f.p) if h.kind == "integration-constant"]
+    names = {n for h in moved for n in h.names}
+    assert {"B[I1.advance@2026-03-05]", "A[X1.lined@2026-03-25]"} <= names
+    h = next(h for h in moved if "B[I1.advance@2026-03-05]" in h.names)
+    ext = a.misfit.extended(h.parameters, h.extra_values, start=f.p)
+    assert ext.parameters.names[-len(h.names):] == h.names
+    assert Parameter(name="B[I1.lined@2026-03-18 08:30]", initial=0.0).name.endswith("08:30]")
+    for bad in ("E[clay]x", "E[]", "E[a[b]]"):
+        with pytest.raises(ValidationError):
+            Parameter(name=bad, initial=1.0)

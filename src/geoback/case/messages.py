@@ -5,9 +5,9 @@ from __future__ import annotations
 import difflib
 from typing import Any
 
-from geoback.case.schema import (Case, Construction, Convergence, Deflectometer, ErrorScale, FitSettings, Geometry, Ground,
-                          Inclinometer, Layer, Lining, MeshSettings, Output, Parameter, PointsInstrument, Prior,
-                          ScalePrior, SlidingMicrometer, Stage, number_text, shown)
+from geoback.case.schema import (PARAMETER_NAME, Case, Construction, Convergence, Deflectometer, ErrorScale, FitSettings,
+                          Geometry, Ground, Inclinometer, Layer, Lining, MeshSettings, Output, Parameter,
+                          PointsInstrument, Prior, ScalePrior, SlidingMicrometer, Stage, number_text, shown)
 from geoback.case.yamlmarks import locate, printable
 
 
@@ -21,7 +21,7 @@ _CHILDREN: dict = {Case: {"geometry": Geometry, "ground": Ground, "mesh": MeshSe
                    Construction: {"lining": Lining, "stages": Stage}}
 _PATTERNS = {r"^[A-Za-z0-9_\-.]+$": "a name of letters, digits, '_', '-' or '.' (no spaces)",
              r"^[A-Za-z_][A-Za-z0-9_\-]*$": "a name starting with a letter or '_', then letters, digits, '_' or '-'",
-             r"^[A-Za-z_][A-Za-z0-9_]*(\[[A-Za-z0-9_\-.]+\])?$":
+             PARAMETER_NAME:
                  "a parameter name such as E, K0, E[layer] or B[instrument]"}
 _PAIRS = {"start": "[x, y]", "end": "[x, y]", "bounds": "[lower, upper]"}
 

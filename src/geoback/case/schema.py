@@ -585,10 +585,14 @@ class ErrorScale(Strict):
         return self
 
 
+PARAMETER_NAME = r"^[A-Za-z_][A-Za-z0-9_]*(\[[^\[\]\n]+\])?$"  # E, K0, E[layer], B[instrument]; an integration
+# constant of one survey carries its reading set, e.g. B[I1.advance@2026-03-05 08:30] (observation/instruments.py)
+
+
 class Parameter(Strict):
     """A quantity to identify: 'E[layer]', 'nu[layer]', 'K0', 'K0[layer]', 'B[instrument]', ..."""
 
-    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*(\[[A-Za-z0-9_\-.]+\])?$")
+    name: str = Field(pattern=PARAMETER_NAME)
     initial: Stress
     bounds: Optional[tuple[Stress, Stress]] = None
     log: Annotated[bool, BeforeValidator(_flag)] = Field(False, description="iterate on log(p) (positive parameters)")
