@@ -39,3 +39,18 @@ def test_a_slack_prop_level_is_named_and_its_stiffness_recovered():
     assert lo[i] <= 12_000.0 <= hi[i]
     assert d.adequate_after and rel.reduced_chi2 < d.baseline_reliability.reduced_chi2
     assert d.causes["ground"] and not d.causes["instrument"]
+
+
+@pytest.mark.slow
+def test_a_lost_preload_is_named_with_an_interval_from_no_preload():
+    """The level-2 props lost their preload at lock-off (0 for 50 kN/m). The truth lies at the preload's natural
+    limit, so the estimate is near 0 and its 95 % interval reaches 0: a finding (the readings bound it above and
+    exclude the assumed 50 kN/m), not an end the readings leave open - the cause is named (check 4 failed it
+    before, as 'reaches a limit the readings do not move it from', and called it tentative for its relative error)."""
+    d = diagnose(load_case(CONCEALED / "excavation-preload-lost.yaml"))
+    assert not d.adequate_before and d.adequate_after
+    assert [s.hypothesis.key for s in d.accepted] == ["preload-lost[P2]"]
+    assert d.grade == "named" and d.accepted[0].checks["determined"].passed
+    (name, v, sd, lo, hi), = d.estimates(d.accepted[0])
+    assert name == "preload[P2]" and lo == 0.0 and 0.0 <= v < hi < 10.0  # kN/m: the 50 assumed far outside
+    assert d.open_ends(name) == (False, False)

@@ -545,6 +545,7 @@ def _open_intervals(final: Identification, misfit: Misfit, settings: Settings, n
     missing physics is where the model is most non-linear in its parameters: a modulus gradient, a
     stratum's modulus; a few dozen fast fits each). An end at a limit (a bound or the allowed range)
     is open: the readings do not bound the parameter there."""
+    from geoback.case.limits import natural_limit
     from geoback.inference.parameters import parameter_limits
     from geoback.inference.profile import profile_interval
 
@@ -565,5 +566,5 @@ def _open_intervals(final: Identification, misfit: Misfit, settings: Settings, n
                                     lo, hi, bool(params.log[i]) or lim.lo > 0)
         except Exception:  # noqa: BLE001 - the linearised interval stays, with its caveat
             continue
-        out[name] = (float(a), float(b), a <= lo, b >= hi)
+        out[name] = (float(a), float(b), a <= lo and not natural_limit(lim, lo), b >= hi)  # (no preload: found)
     return out

@@ -253,7 +253,11 @@ class Diagnosis:
         return "named" if all(s.grade == "named" for s in self.accepted) else "explained"
 
     def bound_of(self, name: str) -> str | None:
-        """'lower' / 'upper' when the final joint fit left parameter `name` on a search bound."""
+        """'lower' / 'upper' when the final joint fit left parameter `name` on a search bound (not at its
+        natural limit: a prop found without preload)."""
+        from geoback.case.limits import natural_limit
+        from geoback.inference.parameters import parameter_limits
+
         params = self.final.parameters
         if name not in params.names:
             return None
@@ -261,6 +265,9 @@ class Diagnosis:
         if not bool(self.final_fit.at_bound[i]):
             return None
         p = self.final_fit.p[i]
+        sim = self.final_misfit.simulation
+        if natural_limit(parameter_limits(sim, name, self.final_misfit.values(self.final_fit.p)), p):
+            return None
         return "lower" if abs(p - params.lower[i]) <= abs(p - params.upper[i]) else "upper"
 
     @property
