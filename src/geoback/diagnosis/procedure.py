@@ -13,7 +13,10 @@
    determine (a significant hypothesis with an undetermined parameter, e.g. a deep stratum of
    unbounded modulus, is accepted only when nothing determined is, and then as tentative); look
    once more; stop when adequate or nothing more is significant. A layer boundary's depth is
-   profiled over a continuous depth (``depth.py``). Hypotheses that no score test can rank
+   profiled over a continuous depth (``depth.py``), for every layer whose boundary's score test is
+   significant, whether or not it ranks among the `refit_top` best (a score is linear at the null, and a
+   modulus several times another is far from it: a soft layer reaching 6 m deeper than stated ranked 8th
+   of 13 and was never searched). Hypotheses that no score test can rank
    (yielding: at an elastic state every sensitivity to the strength is zero; ``yielding.py``) are
    screened instead and refitted whenever the model is not adequate, in the same Bonferroni family.
    Every refit starts from the base model's optimum with the extension at its null value (a layer
