@@ -143,3 +143,39 @@ def test_modulus_written_in_pascal_is_flagged(tmp_path):
     assert code == 0
     w = [w for w in summary["warnings"] if w["code"] == "implausible-input"]
     assert w and "written in Pa" in w[0]["message"]
+
+
+@pytest.mark.quick
+def test_a_fit_at_a_natural_limit_is_a_finding_not_a_bound():
+    """A prop's preload may be 0 (lost at lock-off): an estimate there, or a 95 % interval reaching it, is what
+    the readings found, bounded on the other side - not 'at-bound', not 'not-determined' for its relative error,
+    and its interval closed at 0. A modulus at its search bound keeps both caveats and its open end."""
+    from types import SimpleNamespace
+
+    from geoback.case.limits import MODULUS, PRELOAD
+    from geoback.inference.caveats import fit_caveats
+    from geoback.inference.identification import interval_records
+    from geoback.inference.parameters import ParameterSet
+
+    n = np.array
+    params = ParameterSet(["preload[P2]", "E[marl]"], n([50.0, 9e4]), n([0.0, 9e3]), n([150.0, 9e5]),
+                          n([False, False]), n([np.nan, np.nan]), n([np.nan, np.nan]), ["kN/m", "kPa"])
+    std = n([3.3, 1e4])
+    fit = SimpleNamespace(p=n([0.0, 9e3]), at_bound=n([True, True]), status="converged", moved=True, warnings=(),
+                          reason="")
+    rel = SimpleNamespace(total_dof=100, dof=100, p_value=0.5, error_scales=(), undetermined=(), std=std,
+                          interval95=lambda: (fit.p - 1.96 * std, fit.p + 1.96 * std))
+    codes = {(c.code, c.parameter) for c in fit_caveats(fit, rel, params, [PRELOAD, MODULUS], {})}
+    assert ("at-bound", "E[marl]") in codes and ("not-determined", "E[marl]") in codes  # 100 % of 9 MPa
+    assert not any(p == "preload[P2]" for _, p in codes)
+    pre, mod = interval_records(fit, rel, params, [PRELOAD, MODULUS], {})
+    assert (pre.low, pre.open) == (0.0, (False, False)) and pre.high == pytest.approx(1.96 * 3.3)
+    assert mod.method == "linearised in ln p" and 0 < mod.low < 9e3  # a modulus' interval: in ln p, never below 0
+    # away from 0 a preload is judged as any quantity without a ratio scale: by its interval against its usual range
+    fit.p, fit.at_bound = n([20.0, 9e4]), n([False, False])
+    rel.std = std = n([30.0, 1e3])
+    assert not any(p == "preload[P2]" for _, p in
+                   {(c.code, c.parameter) for c in fit_caveats(fit, rel, params, [PRELOAD, MODULUS], {})})
+    rel.std = n([1500.0, 1e3])  # a 95 % interval wider than a prop's usual 0-5000 kN/m: not determined
+    assert ("not-determined", "preload[P2]") in {(c.code, c.parameter)
+                                                  for c in fit_caveats(fit, rel, params, [PRELOAD, MODULUS], {})}

@@ -16,9 +16,22 @@ class Limits:
     hi: float
     plausible: tuple[float, float]
     usual_for: str = "ground"  # what `plausible` is usual for, in the words of a warning
+    natural_lo: bool = False  # lo is a state the thing can be in (a prop without preload), not only the edge of
+    # what is physical: an estimate there, or a 95 % interval reaching it, is a finding (the readings bound it
+    # on the other side), not a failure of the readings to bound it
 
     def contains(self, v: float) -> bool:
         return self.lo <= v <= self.hi
+
+    def natural(self, bound: float) -> bool:
+        """Whether a lower bound at `bound` is this quantity's natural lower limit (``natural_lo``): a fit
+        may end there, and an interval reach it, as a finding."""
+        return self.natural_lo and bound <= self.lo
+
+
+def natural_limit(lim: Limits | None, bound: float) -> bool:
+    """``Limits.natural`` for a quantity that may have no limits (None: never)."""
+    return lim is not None and lim.natural(bound)
 
 
 MODULUS = Limits(1e-3, 1e9, (500.0, 2e7))  # kPa: 1 Pa .. 1000 GPa allowed; 0.5 MPa .. 20 GPa usual
@@ -60,6 +73,6 @@ LINING: dict[str, tuple[str, Limits]] = {"E": ("kPa", LINING_MODULUS), "nu": ("-
 WALL_MODULUS = Limits(MODULUS.lo, MODULUS.hi, (1e6, 2.5e8), "a concrete or steel wall")
 WALL_POISSON = Limits(POISSON.lo, POISSON.hi, POISSON.plausible, "a concrete or steel wall")
 SUPPORT_STIFFNESS = Limits(1e-6, 1e12, (1e2, 1e8), "a prop or anchor")
-PRELOAD = Limits(0.0, 1e6, (0.0, 5e3), "a prop or anchor")
+PRELOAD = Limits(0.0, 1e6, (0.0, 5e3), "a prop or anchor", natural_lo=True)  # 0: the preload lost
 WALL: dict[str, tuple[str, Limits]] = {"E": ("kPa", WALL_MODULUS), "nu": ("-", WALL_POISSON)}
 SUPPORT: dict[str, tuple[str, Limits]] = {"k": ("kN/m/m", SUPPORT_STIFFNESS), "preload": ("kN/m", PRELOAD)}

@@ -44,7 +44,10 @@ the hypothesis improves the fit but a check fails (results.GRADES).
    Tested again in the final joint fit (``final_determined``): an extra parameter whose 95 % interval
    there (profile likelihood where the linearised one is not reliable) reaches a limit the readings do
    not move it from - a search bound, its allowed range, or a value beyond which the model has no
-   solution - is not determined at that end, whatever its round's linearised interval said. A cause
+   solution - is not determined at that end, whatever its round's linearised interval said. A limit that is a
+   state the quantity can be in (a prop's preload of 0: ``limits.Limits.natural_lo``) is no such end: an estimate
+   there or an interval reaching it is what the readings found (excavation-preload-lost: 95 % [0, 7.6] kN/m
+   for the 50 assumed, named; before, 'not determined' and not singled out). A cause
    accepted before others is tested so only while every cause after it is named: its interval in the final
    model depends on them, and one that is itself not singled out (a surrogate) must not take away the
    determination the earlier cause had in its round (seed 2025, bench-040 of the full library: a true

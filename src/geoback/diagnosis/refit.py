@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from geoback.case.limits import natural_limit
 from geoback.inference.estimate import Fit, Settings, fit
 from geoback.inference.identification import conclude
 from geoback.inference.misfit import Misfit
@@ -64,15 +65,18 @@ def judge(s: Scored) -> None:
     s.caveats = [c for c in found if c.code in ("not-determined", "at-bound")
                  and (c.parameter in mine or (c.parameter is None and any(n in c.message for n in mine)))]
     s.determined = not s.caveats
-    s.at_bound = at_bound(misfit, f, mine)
+    s.at_bound = at_bound(misfit, f, mine, limits)
 
 
-def at_bound(misfit: Misfit, f: Fit, names) -> dict:
+def at_bound(misfit: Misfit, f: Fit, names, limits=None) -> dict:
     """{name: 'lower' | 'upper'} of the parameters among `names` the fit left on a search bound:
-    the readings push them further, and an interval about them would say nothing."""
+    the readings push them further, and an interval about them would say nothing. A bound at the
+    parameter's natural limit (``limits[i]``: no preload) is not one: the readings found it there."""
     params = misfit.parameters
     out = {}
     for i, name in enumerate(params.names):
+        if limits is not None and natural_limit(limits[i], f.p[i]):
+            continue
         if name in names and bool(f.at_bound[i]):
             out[name] = "lower" if abs(f.p[i] - params.lower[i]) <= abs(f.p[i] - params.upper[i]) else "upper"
     return out

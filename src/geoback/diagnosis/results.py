@@ -240,6 +240,46 @@ class Diagnosis:
             return tuple(map(bool, self.final.interval(name).open))
         return False, False
 
+    def interface(self, s: Scored) -> dict | None:
+        """For a named stratum: the part of the split layer as stiff as the case's layer next to it (the
+        difference of the two moduli within its 95 % interval, from the final joint fit's covariance), so
+        that the boundary found is the case's interface at another depth ('soft' reaching 15.9 m rather than
+        the 10 m stated): {part ('upper' or 'lower'), layer, neighbour, z, stated (the case's interface),
+        E, E_neighbour, half_width (of the difference's 95 % interval)}; None otherwise."""
+        prof = self.depth_profile(s)
+        if prof is None or s.grade != "named" or self.loaded is None:
+            return None
+        layers = sorted(self.loaded.case.ground.layers, key=lambda ly: ly.top)
+        names = [ly.name for ly in layers]
+        if prof.layer not in names:
+            return None
+        i = names.index(prof.layer)
+        values = self.final_misfit.values(self.final_fit.p)
+        fitted = list(self.final.parameters.names)
+        C = self.final_reliability.covariance
+
+        def cov(a: str, b: str) -> float:
+            return float(C[fitted.index(a), fitted.index(b)]) if a in fitted and b in fitted else 0.0
+
+        sides = []
+        if i > 0:  # the upper part like the layer above: that layer reaches deeper
+            sides.append(("upper", f"E[{prof.layer}]", names[i - 1], float(layers[i].top)))
+        if i + 1 < len(layers):  # the lower part like the layer below: that layer begins higher
+            sides.append(("lower", f"E[{prof.layer}_below]", names[i + 1], float(layers[i + 1].top)))
+        for part, mine, other, stated in sides:
+            theirs = f"E[{other}]"
+            if mine not in values or theirs not in values:
+                continue
+            var = cov(mine, mine) + cov(theirs, theirs) - 2 * cov(mine, theirs)
+            if not var > 0:
+                continue
+            E, E_other = float(np.real(values[mine])), float(np.real(values[theirs]))
+            half = 1.96 * float(np.sqrt(var))
+            if abs(E - E_other) <= half:
+                return dict(part=part, layer=prof.layer, neighbour=other, z=float(prof.z_hat), stated=stated,
+                            E=E, E_neighbour=E_other, half_width=half)
+        return None
+
     def depth_profile(self, s: Scored) -> DepthProfile | None:
         """The depth profile of an accepted boundary in the final model (or its round's)."""
         return self.final_profiles.get(s.hypothesis.key, s.profile)
@@ -253,7 +293,11 @@ class Diagnosis:
         return "named" if all(s.grade == "named" for s in self.accepted) else "explained"
 
     def bound_of(self, name: str) -> str | None:
-        """'lower' / 'upper' when the final joint fit left parameter `name` on a search bound."""
+        """'lower' / 'upper' when the final joint fit left parameter `name` on a search bound (not at its
+        natural limit: a prop found without preload)."""
+        from geoback.case.limits import natural_limit
+        from geoback.inference.parameters import parameter_limits
+
         params = self.final.parameters
         if name not in params.names:
             return None
@@ -261,6 +305,9 @@ class Diagnosis:
         if not bool(self.final_fit.at_bound[i]):
             return None
         p = self.final_fit.p[i]
+        sim = self.final_misfit.simulation
+        if natural_limit(parameter_limits(sim, name, self.final_misfit.values(self.final_fit.p)), p):
+            return None
         return "lower" if abs(p - params.lower[i]) <= abs(p - params.upper[i]) else "upper"
 
     @property

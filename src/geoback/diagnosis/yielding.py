@@ -137,11 +137,11 @@ def screen(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
             f"the ground yields around the {where}" + (f" ('{name}')" if several else "")
             + f" (Mohr-Coulomb, phi' = {PHI:g} deg and psi = {PSI:g} deg assumed)",
             f"The ground of '{name}' yields around the {where} (Mohr-Coulomb, phi' = {PHI:g} deg and psi = {PSI:g} deg "
-            f"fixed, c' identified). At the elastic fit its stresses near the tunnel would need c' of at least "
+            f"fixed, c' identified). At the elastic fit its stresses near the {where} would need c' of at least "
             f"{c_crit:.3g} kPa to stay elastic, above the {weakest:.3g} kPa of the weakest plausible ground of "
             f"E = {E:.4g} kPa (E/c = {STIFFNESS_TO_STRENGTH:g}); the refit starts from c' = {c0:.3g} kPa (a plastic "
-            f"zone at the wall) and is tested by likelihood ratio (no score test: at an elastic state every "
-            f"sensitivity to the strength is zero).",
+            f"zone {'at the wall' if where == 'tunnel' else 'beside the opening'}) and is tested by likelihood ratio "
+            f"(no score test: at an elastic state every sensitivity to the strength is zero).",
             [Parameter(name=f"c[{name}]", initial=c0, bounds=(c_crit / 200, 2 * c_crit), log=True)]))
     return out
 

@@ -8,9 +8,9 @@ and a sentence that says what was found and what to check. Codes:
 | `not-converged` | the iteration limit was reached |
 | `did-not-move` | no step decreased J: the estimate is the initial value |
 | `model-rejected` | χ² is too large for the stated measurement errors (p < 0.05) |
-| `at-bound` | a parameter ended at one of its bounds |
-| `not-determined` | the readings cannot fix a parameter or a combination (singular, or a 95 % interval wider than the parameter's usual range, or a coefficient of variation of 100 % or more) |
-| `poorly-determined` | a coefficient of variation between 30 % and 100 % |
+| `at-bound` | a parameter ended at one of its bounds (not at a natural limit: a prop without preload is a finding) |
+| `not-determined` | the readings cannot fix a parameter or a combination (singular, or a 95 % interval wider than the parameter's usual range, or, for a quantity on a ratio scale (a modulus, not a preload whose 0 is a state it can be in), a coefficient of variation of 100 % or more) |
+| `poorly-determined` | a coefficient of variation between 30 % and 100 % (a quantity on a ratio scale) |
 | `implausible-value` | an estimate outside the usual range (for ground, or a concrete lining) |
 | `implausible-input` | a value of the case outside the usual range (a unit slip?) |
 | `exactly-determined` | as many readings as parameters: χ² cannot test the model |
@@ -29,6 +29,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from geoback.case.limits import natural_limit
 
 POORLY, UNDETERMINED = 0.30, 1.0  # coefficient of variation
 ALPHA = 0.05
@@ -78,14 +80,14 @@ def fit_caveats(fit, rel, params, limits, profiled: dict) -> list[Caveat]:
     for i, name in enumerate(params.names):
         unit = params.units[i]
         p, sd = float(fit.p[i]), float(rel.std[i])
-        if fit.at_bound[i]:
+        lim = limits[i]
+        if fit.at_bound[i] and not natural_limit(lim, p):  # (a fit at a natural limit, no preload, is a finding)
             lo, hi = params.lower[i], params.upper[i]
             which = lo if abs(p - lo) <= abs(p - hi) else hi
             out.append(Caveat("at-bound", f"{name} ended at its bound {_value(which, unit)}: the readings push it "
                                           f"further (or the bound is wrong); its interval is not meaningful", name))
-        lim = limits[i]
         if np.isfinite(sd) and lim is not None:
-            positive = lim.lo >= 0
+            positive = lim.lo >= 0 and not lim.natural_lo  # a ratio scale: its relative error means something
             cv = sd / abs(p) if p != 0 else np.inf
             wide = 2 * 1.96 * sd > (lim.plausible[1] - lim.plausible[0])
             if (positive and cv >= UNDETERMINED) or (not positive and wide):

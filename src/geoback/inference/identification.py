@@ -20,6 +20,7 @@ from typing import Mapping
 
 import numpy as np
 
+from geoback.case.limits import natural_limit
 from geoback.case.loading import LoadedCase, stage_names
 from geoback.errors import GeobackError
 from geoback.inference.estimate import Fit, Settings, fit
@@ -293,13 +294,13 @@ def interval_records(fit: Fit, rel: Reliability, params: ParameterSet, limits, p
         lim = limits[i]
         a, b = float(lo[i]), float(hi[i])
         method = "linearised in ln p" if params.log[i] else "linearised"
-        if lim is not None and lim.lo >= 0 and a < lim.lo and p > 0 and not params.log[i]:
+        if lim is not None and lim.lo >= 0 and a < lim.lo and p > 0 and not params.log[i] and not lim.natural_lo:
             f = math.exp(min((b - p) / p, 700.0))  # z std / p, as the linearised interval used
             a, b, method = p / f, p * f, "linearised in ln p"
         a_open = b_open = False
         if lim is not None:
-            if a < lim.lo:
-                a, a_open = float(lim.lo), True
+            if a < lim.lo:  # (a natural limit, no preload, closes the interval there: a finding)
+                a, a_open = float(lim.lo), not lim.natural_lo
             if b > lim.hi:
                 b, b_open = float(lim.hi), True
         reason = ""
@@ -593,15 +594,15 @@ def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability,
     out = {}
     for i, name in enumerate(params.names):
         sd = rel.std[i]
-        if not np.isfinite(sd) or sd == 0 or result.at_bound[i]:
-            continue
         lim = limits[i]
+        if not np.isfinite(sd) or sd == 0 or (result.at_bound[i] and not natural_limit(lim, p[i])):
+            continue  # (a fit ended at a natural limit, no preload, is profiled from there)
         lo = max(params.lower[i], lim.lo if lim else -np.inf)
         hi = min(params.upper[i], lim.hi if lim else np.inf)
         need = every
         if not need:
-            positive = lim is not None and lim.lo >= 0
-            need = (positive and sd / abs(p[i]) >= 0.30) or lo_lin[i] < lo or hi_lin[i] > hi
+            ratio = lim is not None and lim.lo >= 0 and not lim.natural_lo and p[i] != 0  # a relative error means something
+            need = (ratio and sd / abs(p[i]) >= 0.30) or lo_lin[i] < lo or hi_lin[i] > hi
         if not need:  # J at the linearised interval's ends, the others at their linearised conditional optimum
             d = rel.covariance[:, i] / rel.covariance[i, i] * 1.96 * sd
             for sign in (-1, 1):
@@ -618,5 +619,6 @@ def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability,
 
             a, b = profile_interval(misfit, settings, p, J0, i, sd, lo, hi,
                                     bool(params.log[i]) or (lim is not None and lim.lo > 0))
-            out[name] = (a, b, a == lo, b == hi)  # an end at a limit: the readings do not bound it there
+            out[name] = (a, b, a == lo and not natural_limit(lim, lo), b == hi)  # an end at a limit: the readings
+            # do not bound it there (at a natural limit, no preload, the end is a finding: closed)
     return out

@@ -125,6 +125,9 @@ def _accepted_words(d, s) -> str:
     elif s.hypothesis.extra_values and s.hypothesis.kind not in ("layer-boundary", "supported-release"):
         title += " at " + ", ".join(f"{k} = {v:g} m" for k, v in s.hypothesis.extra_values.items())
     text = f"{title}: {est}"
+    same = d.interface(s)
+    if same is not None:
+        text += f" - {interface_sentence(same)}"
     if s.grade == "explained":
         why = "; ".join(w for w in (_check_words(s), _rival_words(d, s)) if w)
         text = f"{title} - EXPLAINED BUT NOT SINGLED OUT ({why}): {est}"
@@ -139,6 +142,19 @@ def _accepted_words(d, s) -> str:
         text += (f" - TENTATIVE: the readings do not determine {names} ({'; '.join(why)}); read it as where and "
                  f"which way, not how much")
     return text
+
+
+def interface_sentence(same: dict) -> str:
+    """``Diagnosis.interface`` in words: the case's interface at another depth."""
+    mpa = lambda v: f"{v / 1000:.3g}"  # noqa: E731 - kPa as MPa
+    where = "above" if same["part"] == "upper" else "below"
+    moved = (f"'{same['neighbour']}' may reach {same['z']:.3g} m rather than the {same['stated']:.3g} m the case states"
+             if same["part"] == "upper" else
+             f"'{same['neighbour']}' may begin at {same['z']:.3g} m rather than the {same['stated']:.3g} m the case "
+             f"states")
+    return (f"the ground of '{same['layer']}' {where} {same['z']:.3g} m is as stiff as '{same['neighbour']}' "
+            f"({mpa(same['E'])} against {mpa(same['E_neighbour'])} MPa, the difference within its 95 % interval of "
+            f"± {mpa(same['half_width'])} MPa): {moved}")
 
 
 def cause_words(d) -> str:
@@ -445,6 +461,8 @@ def _item(d, s, final: bool) -> dict:
             item["depth"] = prof.as_dict()
             item["depth"]["from"] = ("final joint fit" if s.hypothesis.key in d.final_profiles
                                      else "profiled in its round (the last effect accepted)")
+            same = d.interface(s)  # one part of the split layer as stiff as the layer next to it, or null
+            item["interface"] = None if same is None else {**same, "words": interface_sentence(same)}
         if s.hypothesis.key in d.strength:
             item["strength"] = d.strength[s.hypothesis.key].as_dict()
         item["tentative"] = not s.determined
