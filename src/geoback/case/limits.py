@@ -23,6 +23,12 @@ class Limits:
     def contains(self, v: float) -> bool:
         return self.lo <= v <= self.hi
 
+    @property
+    def ratio_scale(self) -> bool:
+        """Positive by nature with no natural zero (a modulus, K0, not a preload): a relative error means
+        something, and an interval is kept above 0 by taking it in ln p."""
+        return self.lo >= 0 and not self.natural_lo
+
     def natural(self, bound: float) -> bool:
         """Whether a lower bound at `bound` is this quantity's natural lower limit (``natural_lo``): a fit
         may end there, and an interval reach it, as a finding."""

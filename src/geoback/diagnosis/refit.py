@@ -68,14 +68,14 @@ def judge(s: Scored) -> None:
     s.at_bound = at_bound(misfit, f, mine, limits)
 
 
-def at_bound(misfit: Misfit, f: Fit, names, limits=None) -> dict:
+def at_bound(misfit: Misfit, f: Fit, names, limits) -> dict:
     """{name: 'lower' | 'upper'} of the parameters among `names` the fit left on a search bound:
     the readings push them further, and an interval about them would say nothing. A bound at the
     parameter's natural limit (``limits[i]``: no preload) is not one: the readings found it there."""
     params = misfit.parameters
     out = {}
     for i, name in enumerate(params.names):
-        if limits is not None and natural_limit(limits[i], f.p[i]):
+        if natural_limit(limits[i], f.p[i]):
             continue
         if name in names and bool(f.at_bound[i]):
             out[name] = "lower" if abs(f.p[i] - params.lower[i]) <= abs(f.p[i] - params.upper[i]) else "upper"

@@ -87,7 +87,7 @@ def fit_caveats(fit, rel, params, limits, profiled: dict) -> list[Caveat]:
             out.append(Caveat("at-bound", f"{name} ended at its bound {_value(which, unit)}: the readings push it "
                                           f"further (or the bound is wrong); its interval is not meaningful", name))
         if np.isfinite(sd) and lim is not None:
-            positive = lim.lo >= 0 and not lim.natural_lo  # a ratio scale: its relative error means something
+            positive = lim.ratio_scale
             cv = sd / abs(p) if p != 0 else np.inf
             wide = 2 * 1.96 * sd > (lim.plausible[1] - lim.plausible[0])
             if (positive and cv >= UNDETERMINED) or (not positive and wide):

@@ -294,7 +294,7 @@ def interval_records(fit: Fit, rel: Reliability, params: ParameterSet, limits, p
         lim = limits[i]
         a, b = float(lo[i]), float(hi[i])
         method = "linearised in ln p" if params.log[i] else "linearised"
-        if lim is not None and lim.lo >= 0 and a < lim.lo and p > 0 and not params.log[i] and not lim.natural_lo:
+        if lim is not None and lim.ratio_scale and a < lim.lo and p > 0 and not params.log[i]:
             f = math.exp(min((b - p) / p, 700.0))  # z std / p, as the linearised interval used
             a, b, method = p / f, p * f, "linearised in ln p"
         a_open = b_open = False
@@ -601,7 +601,7 @@ def _profiles(misfit: Misfit, settings: Settings, result: Fit, rel: Reliability,
         hi = min(params.upper[i], lim.hi if lim else np.inf)
         need = every
         if not need:
-            ratio = lim is not None and lim.lo >= 0 and not lim.natural_lo and p[i] != 0  # a relative error means something
+            ratio = lim is not None and lim.ratio_scale and p[i] != 0
             need = (ratio and sd / abs(p[i]) >= 0.30) or lo_lin[i] < lo or hi_lin[i] > hi
         if not need:  # J at the linearised interval's ends, the others at their linearised conditional optimum
             d = rel.covariance[:, i] / rel.covariance[i, i] * 1.96 * sd
