@@ -64,3 +64,44 @@ def test_yielding_refit_does_not_stall_in_the_elastic_region(bench, tmp_path):
     assert not row["error"], row["error"]
     assert row["named"] == "yielding" and row["correct"], row
     assert row["chi2dof_after"] < 0.5 * row["chi2dof_before"]
+
+
+def _rows(path, rows):
+    import csv
+
+    cols = ["case", "kind", "effect_size", "grade", "failed_checks", "accepted", "round1", "correct"]
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols)
+        w.writeheader()
+        for r in rows:
+            w.writerow(dict(zip(cols, r)))
+
+
+def test_the_rival_tradeoff_replays_the_rule_at_other_thresholds(tmp_path, capsys):
+    """benchmarks/rival_tradeoff.py: a cause whose only failed check is its rival is named at a threshold
+    its round-1 lead reaches; a rival of the same family, a refit worse than its base or not converged
+    does not count as a rival; any other failed check keeps it explained."""
+    spec = importlib.util.spec_from_file_location("rival_tradeoff", BENCH.parent / "rival_tradeoff.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    r1 = ("K0-gradient:dJ=30:AIC=-100 depth-offset[I1]:dJ=25:AIC=-93 layer-boundary[clay@5]:dJ=40:AIC=-120:NC "
+          "stiffness-gradient[clay]:dJ=-1:AIC=-150")
+    full = tmp_path / "full.csv"
+    _rows(full, [
+        ("a", "anisotropy", "5.0", "named", "", "anisotropy[clay]", "", "True"),
+        ("b", "K0-gradient", "6.0", "explained", "rivals(depth-offset[I1])", "K0-gradient", r1, "True"),
+        ("c", "K0-gradient", "6.0", "explained", "adequacy", "K0-gradient", r1, "True"),
+        ("d", "bias-shift", "2.0", "named", "", "bias-shift[I1]", "", "True"),  # effect below 3: not counted
+        ("e", "null", "0.1", "", "", "", "", "True"),  # a null case: not counted
+    ])
+    leave = tmp_path / "leave.csv"
+    _rows(leave, [("f", "layer-boundary", "8.0", "explained", "rivals(K0-gradient)", "depth-offset[I1]",
+                   r1.replace("K0-gradient:dJ=30:AIC=-100", "K0-gradient:dJ=30:AIC=-90"), "False")])
+    assert mod.lead({"accepted": "anisotropy[clay]", "round1": r1}) is None  # not refitted in round 1
+    mod.main(["--full", str(full), "--leave-out", str(leave), "--thresholds", "10", "7", "3"])
+    lines = capsys.readouterr().out.splitlines()
+    table = {line.split()[0]: line.split() for line in lines if line.strip()[:2].strip().isdigit()}
+    assert table["10"][1] == "1/3" and table["10"][5] == "0/1"  # lead 7 (b), lead 3 (f)
+    assert table["7"][1] == "2/3" and table["7"][5] == "0/1"
+    assert table["3"][1] == "2/3" and table["3"][5] == "1/1"  # c fails adequacy: never named here
+    assert "3/3 = 100.0 %" in lines[-1]  # the ceiling: the right family accepted first, named or not

@@ -202,3 +202,39 @@ def test_sensitivities_match_central_differences():
     col = A[:, names.index("B[I1]")]
     np.testing.assert_array_equal(col[rows_i1], -1.0)
     assert np.count_nonzero(col) == len(rows_i1)
+
+
+# ----------------------------------------------------------------------------- pooled instrument tests
+def test_the_exact_level_of_the_largest_of_correlated_statistics():
+    """studies/instrument_pooling.py: P(max |Z_i| > c) for Z ~ N(0, R) is Sidak's for independent
+    members, a single test's for identical ones, and in between otherwise."""
+    from scipy import stats
+
+    import instrument_pooling as study
+
+    level = 0.05 / 9
+    single = stats.norm.isf(level / 2)
+    sidak = stats.norm.isf((1 - (1 - level) ** (1 / 3)) / 2)
+    assert study.pooled_critical(level, np.eye(1)) == pytest.approx(single, abs=1e-5)
+    assert study.pooled_critical(level, np.eye(3)) == pytest.approx(sidak, abs=1e-4)
+    same = np.full((3, 3), 1.0)
+    assert study.pooled_critical(level, same) == pytest.approx(single, abs=1e-3)
+    R = np.array([[1.0, 0.0, -0.8], [0.0, 1.0, 0.0], [-0.8, 0.0, 1.0]])
+    assert single < study.pooled_critical(level, R) < sidak
+    assert study.power(single, 0.0) == pytest.approx(level)
+
+
+def test_pooling_an_inclinometers_errors_would_cost_them_power_on_the_shipped_layout(out, capsys):
+    """The shipped concealed cases (one layout, two inclinometers and an extensometer): an inclinometer's
+    three error hypotheses are nearly independent (|correlation| <= 0.3), so one pooled test of them would
+    accept each at a stricter level than the single tests do, and find an instrument error less often."""
+    import instrument_pooling as study
+
+    rows = study.main(["--random", "0", "--out", str(out)])
+    assert rows and {r["members"] for r in rows} == {3}
+    for r in rows:
+        assert r["largest_correlation"] < 0.3
+        assert r["family_pooled"] == r["family"] - 4  # two inclinometers, three errors each
+        assert r["c_pooled"] > r["c"]
+        assert r["power_instrument_pooled"] < r["power_instrument"] < r["power_ground_pooled"]
+    assert (out / "instrument_pooling.csv").stat().st_size > 0

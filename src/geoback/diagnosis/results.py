@@ -41,6 +41,8 @@ class Scored:
     bic: float = float("nan")
     misfit: Misfit | None = None  # the baseline extended with the hypothesis
     m2_norms: np.ndarray | None = None  # per extra parameter: the whitened sensitivity the baseline cannot mimic
+    m2: np.ndarray | None = None  # those sensitivities themselves (one column per extra parameter): the
+    # correlation of two hypotheses' score statistics under the null is that of their columns
     detectable: dict = field(default_factory=dict)  # parameter -> |change| the score test catches with 80 %
     determined: bool = True  # the readings determine every extra parameter of the refit (caveats.py)
     caveats: list = field(default_factory=list)  # the refit's caveats on its extra parameters

@@ -49,9 +49,10 @@ def _profile(ax, fc, rows, pos, label, vertical: bool) -> None:
     alert = fc.alert[r[0]]
     if np.isfinite(alert):
         line = ax.axvline if vertical else ax.axhline
-        for s in (-1, 1):
-            if (s < 0 and lo.min() < 0) or (s > 0 and hi.max() > 0):
-                line(s * f * alert, color=ALERT, lw=1.0, ls=":", label="alert level")
+        drawn = [s for s in (-1, 1) if (s < 0 and lo.min() < 0) or (s > 0 and hi.max() > 0)]
+        for s in drawn:  # one legend entry for the pair
+            line(s * f * alert, color=ALERT, lw=1.0, ls=":",
+                 label=("alert level (±)" if len(drawn) == 2 else "alert level") if s == drawn[0] else None)
     what = f"{quantity_words(fc, r[0])} [{unit}]"
     if vertical:
         ax.set_xlabel(what)

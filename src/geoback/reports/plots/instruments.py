@@ -304,7 +304,7 @@ def _draw(fig, data: _Readings, profiles: dict, before, boundaries, legend: list
         n_read = sum(len(rows) for _, rows in group)
         surveyed = any(blk.survey for blk, _ in group)  # dated surveys: one set a survey, named by its date
         sets = "surveys" if surveyed else "stages"
-        title = f"{block.name} ({block.kind.replace('_', ' ')}, {n_read} readings" + (
+        title = f"{block.name} ({block.kind.replace('_', ' ')}, {n_read} reading{'s' if n_read != 1 else ''}" + (
             f" at {len(group)} {sets})" if len(group) > 1 else ")")
         if data.residual is not None:  # the misfit of each set in the title: never over the readings
             sums = [(f"{blk.stage} {blk.survey}" if blk.survey else blk.stage, data.residual[rows])
