@@ -34,6 +34,8 @@ def test_coverage_study_small(tmp_path):
     total = next(t for t in result["table"] if t["kind"] == "all" and t["band"] == "all")
     assert total["intervals"] == sum(len(r["coverage"]) for r in named) >= 4
     assert total["covered"] >= total["intervals"] - 2
+    graded = [c for r in named if r["grade"] == "named" for c in r["coverage"]]  # the verdict's own intervals
+    assert total["intervals_named"] == len(graded) and total["covered_named"] == sum(c["covered"] for c in graded)
 
 
 @pytest.mark.slow
