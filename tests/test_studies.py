@@ -238,3 +238,44 @@ def test_pooling_an_inclinometers_errors_would_cost_them_power_on_the_shipped_la
         assert r["c_pooled"] > r["c"]
         assert r["power_instrument_pooled"] < r["power_instrument"] < r["power_ground_pooled"]
     assert (out / "instrument_pooling.csv").stat().st_size > 0
+
+
+# ----------------------------------------------------------------------------- the reading a tie asks for
+def _tie_csv(path):
+    import csv
+
+    cols = ["seed", "case", "kind", "effect_size", "correct", "grade", "failed_checks"]
+    rows = [("2033", "bench-016-depth-offset", "depth-offset", "5.1", "True", "explained", "rivals(K0-gradient)"),
+            ("2033", "bench-008-stress-release", "stress-release", "8.5", "True", "explained", "adequacy"),
+            ("2033", "bench-002-bias-shift", "bias-shift", "2.9", "True", "explained", "rivals(anisotropy[clay])"),
+            ("2034", "bench-003-K0-gradient", "K0-gradient", "7.5", "False", "explained", "rivals(depth-offset[I1])")]
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(cols)
+        w.writerows(rows)
+
+
+def test_the_tied_cases_and_the_reading_added(tmp_path):
+    """studies/separating_reading.py: a tie is a right first cause explained only by its rival check, effect > 3;
+    the reading added is one point reading the component named, with the case's extensometer's sigma."""
+    import separating_reading as study
+
+    _tie_csv(tmp_path / "full.csv")
+    assert [r["case"] for r in study.tied_rows(tmp_path / "full.csv")] == ["bench-016-depth-offset"]
+    spec = {"data": {"instruments": [{"name": "X1", "kind": "extensometer", "sigma": 0.00021}]}}
+    added = study.with_reading(spec, {"x": 2.8234, "depth": 11.1049, "component": "ux", "difference": 0.0044})
+    assert spec["data"]["instruments"] == [{"name": "X1", "kind": "extensometer", "sigma": 0.00021}]  # not changed
+    assert added["data"]["instruments"][-1] == {"name": "N1", "kind": "points", "points": [[2.823, -11.105]],
+                                                "components": ["ux"], "sigma": 0.00021}
+
+
+@pytest.mark.slow  # 15 s: one benchmark case diagnosed twice
+def test_the_reading_a_tie_asks_for_singles_the_cause_out(tmp_path):
+    """Seed 2033 bench-016 of the accuracy benchmark: a depth offset of I1 tied with a K0 gradient (within 10
+    AIC); one reading of u_x where the two refits differ most (4.4 mm) names the depth offset."""
+    import separating_reading as study
+
+    _tie_csv(tmp_path / "full.csv")
+    out = study.main(["--csv", str(tmp_path / "full.csv"), "--out", str(tmp_path)])
+    assert len(out) == 1 and out[0]["rival"] == "K0-gradient" and out[0]["outcome"] == "named right", out
+    assert (tmp_path / "separating_reading.csv").stat().st_size > 0

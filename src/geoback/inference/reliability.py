@@ -122,10 +122,10 @@ class Reliability:
             z = np.where(np.isfinite(nu), special.stdtrit(np.where(np.isfinite(nu), nu, 1.0), 0.975), z)
         lo, hi = self.p - z * self.std, self.p + z * self.std
         if self.log is not None and np.any(self.log):
-            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-                f = np.exp(z * self.std / np.abs(self.p))
-            lo = np.where(self.log, self.p / f, lo)
-            hi = np.where(self.log, self.p * f, hi)
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # (also where a parameter not
+                f = np.exp(z * self.std / np.abs(self.p))  # on a log scale is 0: 0 * inf there, not used)
+                lo = np.where(self.log, self.p / f, lo)
+                hi = np.where(self.log, self.p * f, hi)
         return lo, hi
 
     def ellipse_limit(self, level: float = 0.95) -> float:
