@@ -212,8 +212,7 @@ def score_hypotheses(misfit: Misfit, p_hat: np.ndarray, hypotheses: list[Hypothe
             continue
         coef = np.linalg.lstsq(M2, r, rcond=None)[0]
         S = float(np.sum((M2 @ coef) ** 2))
-        out.append(Scored(h, S, k, chi2_sf(S, k), J0=J0, misfit=ext, m2_norms=np.linalg.norm(M2, axis=0),
-                          m2=M2))
+        out.append(Scored(h, S, k, chi2_sf(S, k), J0=J0, misfit=ext, m2=M2))
     return out
 
 

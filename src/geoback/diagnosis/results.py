@@ -40,9 +40,8 @@ class Scored:
     aic: float = float("nan")
     bic: float = float("nan")
     misfit: Misfit | None = None  # the baseline extended with the hypothesis
-    m2_norms: np.ndarray | None = None  # per extra parameter: the whitened sensitivity the baseline cannot mimic
-    m2: np.ndarray | None = None  # those sensitivities themselves (one column per extra parameter): the
-    # correlation of two hypotheses' score statistics under the null is that of their columns
+    m2: np.ndarray | None = None  # per extra parameter (a column each): the whitened sensitivity the baseline
+    # cannot mimic; the correlation of two hypotheses' score statistics under the null is that of their columns
     detectable: dict = field(default_factory=dict)  # parameter -> |change| the score test catches with 80 %
     determined: bool = True  # the readings determine every extra parameter of the refit (caveats.py)
     caveats: list = field(default_factory=list)  # the refit's caveats on its extra parameters
@@ -55,6 +54,11 @@ class Scored:
     grade: str = ""  # an accepted hypothesis: 'named' or 'explained' (GRADES; claims.py)
     checks: dict = field(default_factory=dict)  # the claim checks: name -> claims.Check
     rivals: list = field(default_factory=list)  # refits of other families that explain the readings as well
+
+    @property
+    def m2_norms(self) -> np.ndarray | None:
+        """The norm of each extra parameter's column of ``m2`` (what its score test can see of it)."""
+        return None if self.m2 is None else np.linalg.norm(self.m2, axis=0)
 
     @property
     def settled(self) -> bool:
