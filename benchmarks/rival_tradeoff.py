@@ -62,11 +62,27 @@ def named_at(row: dict, threshold: float) -> bool:
     return m is not None and m >= threshold
 
 
+NEEDED = ("kind", "effect_size", "grade", "failed_checks", "accepted", "round1", "correct")
+
+
+def refuse(message: str) -> None:
+    """A file this script cannot read as meant: said on stderr, exit status 2."""
+    print(message, file=sys.stderr)
+    raise SystemExit(2)
+
+
 def concealed(paths: list[Path]) -> list[dict]:
     rows = []
     for path in paths:
+        if not path.is_file():
+            refuse(f"{path}: no such file (expected a CSV of benchmarks/diagnosis_accuracy.py --out)")
         with open(path, newline="") as fh:
-            for r in csv.DictReader(fh):
+            reader = csv.DictReader(fh)
+            missing = [c for c in NEEDED if c not in (reader.fieldnames or [])]
+            if missing:
+                refuse(f"{path}: line 1: expected the columns of benchmarks/diagnosis_accuracy.py's CSV, "
+                       f"found none named {', '.join(missing)}")
+            for r in reader:
                 if r["kind"].startswith("null") or r["effect_size"] in ("", "nan"):
                     continue
                 if float(r["effect_size"]) > 3:
