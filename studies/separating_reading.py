@@ -2,8 +2,9 @@
 
 When another family explains the readings within 10 AIC of the accepted cause (claims check 3), the
 verdict is *explained but not singled out* and says what would tell the two apart, among it the point
-of the ground where the two refitted models' displacements differ most (``compare.separation``: "a new
-reading of uy at x = 0 m, depth 17.2 m would differ by 4.9 mm between them"). This study takes such
+of the ground where the two refitted models' displacements differ most (the round's ``separation``, made
+by ``compare.separation`` for its closest rival: "a new reading of uy at x = 0 m, depth 17.2 m would differ
+by 4.9 mm between them"; the same in diagnosis.json). This study takes such
 tied cases of the accuracy benchmark (``benchmarks/diagnosis_accuracy.py``: a random tunnel, instrument
 layout and concealed effect, readings from the truth on a mesh twice as fine with noise), adds that one
 reading - a point reading the component named, with the case's extensometer's sigma, read from the same
@@ -80,8 +81,6 @@ def with_reading(spec: dict, point: dict) -> dict:
 
 
 def study(rows: list[dict], counts: dict, leave_out: bool = False) -> list[dict]:
-    from geoback.diagnosis.compare import separation
-
     bench = _bench()
     out = []
     with tempfile.TemporaryDirectory() as folder:
@@ -98,8 +97,9 @@ def study(rows: list[dict], counts: dict, leave_out: bool = False) -> list[dict]
             if first is None or not first.rivals or first.grade != "explained":
                 out.append({**_ids(r), "outcome": "not tied when drawn again"})
                 continue
-            sep = separation(first, first.rivals[0], problem.misfit.data)
-            if not sep.new_points:
+            rnd = next(rd for rd in d.rounds if rd.accepted is first)  # the reading its verdict asks for
+            sep = rnd.separation if rnd.rival in first.rivals else None
+            if sep is None or not sep.new_points:
                 out.append({**_ids(r), "outcome": "no point suggested"})
                 continue
             point = sep.new_points[0]
@@ -114,7 +114,7 @@ def study(rows: list[dict], counts: dict, leave_out: bool = False) -> list[dict]
             outcome = ("named right" if kind == r["kind"] and grade == "named" else
                        "named wrong" if grade == "named" else "still tied" if a and a.rivals else
                        "nothing accepted" if a is None else f"{kind} {grade}")
-            row = {**_ids(r), "rival": first.rivals[0].hypothesis.kind, "component": point["component"],
+            row = {**_ids(r), "rival": rnd.rival.hypothesis.kind, "component": point["component"],
                    "x": point["x"], "depth": point["depth"], "difference_mm": 1e3 * point["difference"],
                    "after": kind, "grade_after": grade, "outcome": outcome}
             out.append(row)
