@@ -52,11 +52,22 @@ def lead(row: dict) -> float | None:
     return min(others) - aic[first] if others else float("inf")
 
 
+def failed_checks(text: str) -> list[str]:
+    """The names of the failed claim checks in the CSV's 'failed_checks' ('rivals(a b) adequacy' -> ['rivals',
+    'adequacy']: a check's parenthesised detail, the rivals' keys, may hold spaces)."""
+    return re.sub(r"\([^()]*\)", "", text).split()
+
+
+def only_rivals(row: dict) -> bool:
+    """Explained only because a rival of another family ties it: the rival check its one failed check."""
+    failed = failed_checks(row["failed_checks"])
+    return row["grade"] == "explained" and bool(failed) and set(failed) == {"rivals"}
+
+
 def named_at(row: dict, threshold: float) -> bool:
     if row["grade"] == "named":
         return True
-    failed = row["failed_checks"].split()
-    if row["grade"] != "explained" or not failed or not all(f.startswith("rivals(") for f in failed):
+    if not only_rivals(row):
         return False
     m = lead(row)
     return m is not None and m >= threshold

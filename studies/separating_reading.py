@@ -57,12 +57,18 @@ def tied_rows(path: Path, leave_out: bool = False) -> list[dict]:
     out = []
     with open(path, newline="") as fh:
         for r in csv.DictReader(fh):
-            failed = r["failed_checks"].split()
-            if ((r["correct"] == "True" or leave_out) and r["grade"] == "explained" and failed
-                    and all(f.startswith("rivals(") for f in failed) and r["effect_size"] not in ("", "nan")
-                    and float(r["effect_size"]) > 3):
+            if ((r["correct"] == "True" or leave_out) and _tradeoff().only_rivals(r)
+                    and r["effect_size"] not in ("", "nan") and float(r["effect_size"]) > 3):
                 out.append(r)
     return out
+
+
+def _tradeoff():
+    """benchmarks/rival_tradeoff.py: what a tie is, read from the benchmark's CSV (written there once)."""
+    spec = importlib.util.spec_from_file_location("rival_tradeoff", C.ROOT / "benchmarks" / "rival_tradeoff.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def _verdict(bench, spec: dict, folder: str):

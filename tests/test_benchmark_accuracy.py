@@ -91,6 +91,8 @@ def test_the_rival_tradeoff_replays_the_rule_at_other_thresholds(tmp_path, capsy
         ("a", "anisotropy", "5.0", "named", "", "anisotropy[clay]", "", "True"),
         ("b", "K0-gradient", "6.0", "explained", "rivals(depth-offset[I1])", "K0-gradient", r1, "True"),
         ("c", "K0-gradient", "6.0", "explained", "adequacy", "K0-gradient", r1, "True"),
+        ("g", "K0-gradient", "6.0", "explained", "rivals(depth-offset[I1] layer-boundary[clay@5])", "K0-gradient",
+         r1, "True"),  # two rivals in the check's detail: still only the rival check failed
         ("d", "bias-shift", "2.0", "named", "", "bias-shift[I1]", "", "True"),  # effect below 3: not counted
         ("e", "null", "0.1", "", "", "", "", "True"),  # a null case: not counted
     ])
@@ -101,7 +103,8 @@ def test_the_rival_tradeoff_replays_the_rule_at_other_thresholds(tmp_path, capsy
     mod.main(["--full", str(full), "--leave-out", str(leave), "--thresholds", "10", "7", "3"])
     lines = capsys.readouterr().out.splitlines()
     table = {line.split()[0]: line.split() for line in lines if line.strip()[:2].strip().isdigit()}
-    assert table["10"][1] == "1/3" and table["10"][5] == "0/1"  # lead 7 (b), lead 3 (f)
-    assert table["7"][1] == "2/3" and table["7"][5] == "0/1"
-    assert table["3"][1] == "2/3" and table["3"][5] == "1/1"  # c fails adequacy: never named here
-    assert "3/3 = 100.0 %" in lines[-1]  # the ceiling: the right family accepted first, named or not
+    assert table["10"][1] == "1/4" and table["10"][5] == "0/1"  # lead 7 (b, g), lead 3 (f)
+    assert table["7"][1] == "3/4" and table["7"][5] == "0/1"
+    assert table["3"][1] == "3/4" and table["3"][5] == "1/1"  # c fails adequacy: never named here
+    assert "4/4 = 100.0 %" in lines[-1]  # the ceiling: the right family accepted first, named or not
+    assert mod.failed_checks("cross-validation rivals(a[b] c) adequacy") == ["cross-validation", "rivals", "adequacy"]
