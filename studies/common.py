@@ -35,6 +35,21 @@ P_TRUE = np.array([E_TRUE, K0_TRUE])
 
 
 # ---------------------------------------------------------------------------- cases
+def script(relative: str):
+    """A script of the repository (e.g. 'benchmarks/diagnosis_accuracy.py', the one source of concealed cases)
+    as a module, loaded once per process under its file's stem."""
+    import importlib.util
+    import sys
+
+    name = Path(relative).stem
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, ROOT / relative)
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+    return sys.modules[name]
+
+
 def paper_case_dict() -> dict:
     """The paper case as a plain dict (a fresh copy each call)."""
     with open(PAPER_CASE, encoding="utf-8") as fh:

@@ -38,7 +38,6 @@ for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import csv  # noqa: E402
-import importlib.util  # noqa: E402
 import math  # noqa: E402
 import shutil  # noqa: E402
 import sys  # noqa: E402
@@ -49,8 +48,10 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import common as C  # noqa: E402
+
 HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
 OUT = HERE / "out"
 NAME = "diagnose_coverage"
 KINDS = ["stiffness-gradient", "layer-boundary", "anisotropy", "K0-gradient", "integration-constant",
@@ -61,11 +62,7 @@ SMALL_KINDS = ["bias-shift", "anisotropy", "depth-offset"]
 
 def _bench():
     """The accuracy benchmark's case generator and runner (one source of concealed cases)."""
-    spec = importlib.util.spec_from_file_location("diagnosis_accuracy", ROOT / "benchmarks" / "diagnosis_accuracy.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("diagnosis_accuracy", mod)
-    spec.loader.exec_module(mod)
-    return mod
+    return C.script("benchmarks/diagnosis_accuracy.py")
 
 
 def _run(spec: dict, folder: str) -> dict:

@@ -86,13 +86,7 @@ def staged_case():
 
 def plastic_truth() -> dict:
     """The true values of cases/generate_plastic_tunnel.py (the generator of the shipped readings)."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("generate_plastic_tunnel",
-                                                  C.ROOT / "cases" / "generate_plastic_tunnel.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return dict(mod.TRUTH)
+    return dict(C.script("cases/generate_plastic_tunnel.py").TRUTH)
 
 
 def plastic_case(mesh_scale: float = 1.0):

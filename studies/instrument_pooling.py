@@ -89,13 +89,9 @@ def _problems(random: int, seed: int):
     for name in CASES:
         yield name, str(C.ROOT / "cases" / "concealed" / f"{name}.yaml")
     if random:
-        import importlib.util
         import tempfile
 
-        spec = importlib.util.spec_from_file_location("diagnosis_accuracy", C.ROOT / "benchmarks" / "diagnosis_accuracy.py")
-        bench = importlib.util.module_from_spec(spec)
-        sys.modules.setdefault("diagnosis_accuracy", bench)
-        spec.loader.exec_module(bench)
+        bench = C.script("benchmarks/diagnosis_accuracy.py")
         with tempfile.TemporaryDirectory() as folder:
             for i in range(random):
                 case = bench.random_case(i, "null", seed)

@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import copy
 import csv
-import importlib.util
 import os
 import sys
 import tempfile
@@ -43,32 +42,16 @@ import common as C  # noqa: E402
 NAME = "separating_reading"
 
 
-def _bench():
-    spec = importlib.util.spec_from_file_location("diagnosis_accuracy", C.ROOT / "benchmarks" / "diagnosis_accuracy.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("diagnosis_accuracy", mod)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def tied_rows(path: Path, leave_out: bool = False) -> list[dict]:
     """The benchmark rows whose right first cause is explained only because a rival of another family ties it
     (with `leave_out`, rows of a --leave-out run: the first cause is of another family than the truth's)."""
     out = []
     with open(path, newline="") as fh:
         for r in csv.DictReader(fh):
-            if ((r["correct"] == "True" or leave_out) and _tradeoff().only_rivals(r)
+            if ((r["correct"] == "True" or leave_out) and C.script("benchmarks/rival_tradeoff.py").only_rivals(r)
                     and r["effect_size"] not in ("", "nan") and float(r["effect_size"]) > 3):
                 out.append(r)
     return out
-
-
-def _tradeoff():
-    """benchmarks/rival_tradeoff.py: what a tie is, read from the benchmark's CSV (written there once)."""
-    spec = importlib.util.spec_from_file_location("rival_tradeoff", C.ROOT / "benchmarks" / "rival_tradeoff.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _verdict(bench, spec: dict, folder: str):
@@ -87,7 +70,7 @@ def with_reading(spec: dict, point: dict) -> dict:
 
 
 def study(rows: list[dict], counts: dict, leave_out: bool = False) -> list[dict]:
-    bench = _bench()
+    bench = C.script("benchmarks/diagnosis_accuracy.py")
     out = []
     with tempfile.TemporaryDirectory() as folder:
         for r in rows:
