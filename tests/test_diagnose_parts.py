@@ -111,7 +111,8 @@ def test_rivals_are_stated_with_the_readings_that_separate_them():
     y[k] = 3e-3  # 3 mm at I2 station 5
     a = SimpleNamespace(refit=SimpleNamespace(x=x), misfit=None,
                         hypothesis=SimpleNamespace(key="stiffness-gradient[clay]", cause="ground",
-                                                   title="modulus of 'clay' increasing with depth"), aic=-10.0)
+                                                   title="modulus of 'clay' increasing with depth"), aic=-10.0,
+                          rivals=[], separations={}, reliability=None)
     b = SimpleNamespace(refit=SimpleNamespace(x=y), misfit=None,
                         hypothesis=SimpleNamespace(key="layer-boundary[clay@20]", cause="ground",
                                                    title="a different stratum below 20 m in 'clay'"), aic=-9.7)
@@ -124,3 +125,41 @@ def test_rivals_are_stated_with_the_readings_that_separate_them():
     assert text.startswith("Modulus of 'clay' increasing with depth (ground physics) and a different stratum below "
                            "20 m in 'clay' (ground physics) fit about equally well (Akaike weights 0.48 / 0.41")
     assert "I2 station 5" in text
+
+
+def test_every_rival_within_the_evidence_is_stated_in_words_its_aic_difference_bears():
+    """Check 3's rivals (another family within 10 AIC): each is stated with what would tell it from the
+    accepted cause (its own separation), and beyond 2 AIC the words say which fits better and that the
+    margin does not single it out, never that the two fit 'about equally well' (a depth offset 9.1 AIC
+    ahead has Akaike weight 0.99). Where the accepted refit leaves chi^2/dof c > 1 the difference is
+    graded divided by c, as check 3 grades it."""
+    from geoback.diagnosis.compare import Separation
+    from geoback.reports.diagnosis_report import _rival_words, rival_sentences
+
+    def hyp(key, cause, title, aic, **more):
+        return SimpleNamespace(hypothesis=SimpleNamespace(key=key, cause=cause, title=title), aic=aic, **more)
+
+    k0 = hyp("K0-gradient", "ground", "K0 varying with depth", -90.9)
+    layer = hyp("layer-boundary[clay@15]", "ground", "a different stratum below 15 m in 'clay'", -99.0)
+    far = Separation(new_points=[{"x": 0.0, "depth": 15.4, "component": "uy", "difference": -6.1e-3}])
+    near = Separation(new_points=[{"x": 9.0, "depth": 3.0, "component": "ux", "difference": 2.0e-3}])
+    acc = hyp("depth-offset[I1]", "instrument", "inclinometer I1: depth offset", -100.0, rivals=[layer, k0],
+              separations={"K0-gradient": far, "layer-boundary[clay@15]": near},
+              reliability=SimpleNamespace(reduced_chi2=1.1, p_value=0.2))
+    rnd = SimpleNamespace(accepted=acc, rival=layer, separation=near,
+                          weights={"depth-offset[I1]": 0.72, "layer-boundary[clay@15]": 0.28, "K0-gradient": 0.003})
+    first, second = rival_sentences(SimpleNamespace(rounds=[rnd]))
+    assert first.startswith("Inclinometer I1: depth offset (instrument error) and a different stratum below 15 m in "
+                            "'clay' (ground physics) fit about equally well (Akaike weights 0.72 / 0.28, ΔAIC = 1)")
+    assert "ux at x = 9 m, depth 3 m would differ by 2 mm" in first and "15.4" not in first
+    assert second.startswith("Inclinometer I1: depth offset (instrument error) fits better than K0 varying with depth "
+                             "(ground physics) (Akaike weights 0.72 / 0.003, ΔAIC = 9.1), but not by the 10 AIC units "
+                             "that single a cause out: K0 varying with depth keeps some support")
+    assert "uy at x = 0 m, depth 15.4 m would differ by 6.1 mm" in second and "about equally" not in second
+    words = _rival_words(None, acc)
+    assert words.index("a different stratum") < words.index("ux at x = 9 m") < words.index("K0 varying") < words.index(
+        "uy at x = 0 m"), words
+    # overdispersed: 9.1 AIC over chi^2/dof 5 is 1.8, within 2: about equally well, and the scaling said
+    acc.reliability = SimpleNamespace(reduced_chi2=5.0, p_value=1e-6)
+    second = rival_sentences(SimpleNamespace(rounds=[rnd]))[1]
+    assert "fit about equally well" in second and "1.8 divided by the χ²/dof 5 the refit leaves" in second, second

@@ -527,9 +527,10 @@ def _claim_checks(rnd: Round, current: Misfit, cur_fit: Fit, alpha: float, say) 
         say(f"claim checks of its rivals: {', '.join(s.hypothesis.title for s in near)}")
     acc.rivals = [s for s in near if claims.credible(s, current, cur_fit.p)]
     acc.checks["rivals"] = claims.rival_check(acc, acc.rivals, [s for s in near if s not in acc.rivals])
+    acc.separations = {s.hypothesis.key: separation(acc, s, current.data) for s in acc.rivals}
     if acc.rivals and (rnd.rival is None or rnd.rival.family == acc.family):
         rnd.rival = acc.rivals[0]
-        rnd.separation = separation(acc, rnd.rival, current.data)
+        rnd.separation = acc.separations[rnd.rival.hypothesis.key]
     acc.grade = claims.grade(acc.checks)
 
 

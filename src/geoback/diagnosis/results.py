@@ -54,6 +54,8 @@ class Scored:
     grade: str = ""  # an accepted hypothesis: 'named' or 'explained' (GRADES; claims.py)
     checks: dict = field(default_factory=dict)  # the claim checks: name -> claims.Check
     rivals: list = field(default_factory=list)  # refits of other families that explain the readings as well
+    separations: dict = field(default_factory=dict)  # rival's key -> compare.Separation: where its predictions and
+    # this cause's differ most (existing readings, instruments, new points): what would tell the two apart
 
     @property
     def m2_norms(self) -> np.ndarray | None:
@@ -90,8 +92,9 @@ class Round:
     scale_threshold: float = float("nan")  # per-scale level alpha / G (Bonferroni over the estimated scales)
     aic: float = float("nan")  # of the round's model (no hypothesis added)
     weights: dict = field(default_factory=dict)  # Akaike weights: hypothesis key (or NO_ADDITION) -> weight
-    rival: Scored | None = None  # a hypothesis within 2 AIC of the accepted one
-    separation: object = None  # compare.Separation of the accepted one and its rival
+    rival: Scored | None = None  # a hypothesis within 2 AIC of the accepted one, else its closest rival of another
+    # family within the evidence (check 3; all of them: the accepted one's ``rivals``)
+    separation: object = None  # compare.Separation of the accepted one and this rival
     tentative: bool = False  # accepted although an extra parameter is not determined
     hypotheses: int = 0  # hypotheses scored (every depth of a layer boundary counted)
     screened: int = 0  # hypotheses no score test can rank, refitted instead (yielding): in the family too

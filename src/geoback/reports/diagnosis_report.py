@@ -8,7 +8,8 @@ import numpy as np
 
 from geoback.outputs import write_atomic, write_json
 from geoback.reports.resultsets import result_set
-from geoback.diagnosis.compare import detectable_text, unit_of
+from geoback.diagnosis.claims import RIVAL_AIC, overdispersion
+from geoback.diagnosis.compare import EQUAL_AIC, detectable_text, unit_of
 from geoback.diagnosis.hypotheses import CAUSES, KINDS
 from geoback.diagnosis.procedure import NO_ADDITION
 from geoback.diagnosis.results import GRADES
@@ -68,16 +69,17 @@ def _check_words(s) -> str:
 
 
 def _rival_words(d, s) -> str:
-    """The rivals of other families of an accepted cause, with what would tell them apart."""
+    """The rivals of other families of an accepted cause, each with what would tell it from the cause."""
     if not s.rivals:
         return ""
-    rnd = next((r for r in d.rounds if r.accepted is s), None)
-    names = " or ".join(f"{r.hypothesis.title} ({CAUSES[r.hypothesis.cause]}, ΔAIC {r.aic - s.aic:+.2g})"
-                        for r in s.rivals)
-    sep = ""
-    if rnd is not None and rnd.separation is not None and rnd.rival in s.rivals:
-        sep = rnd.separation.text(s.hypothesis.title, rnd.rival.hypothesis.title)
-    return (f"it is not singled out from {names}" + (f"; what would tell them apart: {sep}" if sep else "")
+
+    def one(r) -> str:
+        sep = s.separations.get(r.hypothesis.key)
+        told = sep.text(s.hypothesis.title, r.hypothesis.title) if sep is not None else ""
+        return (f"{r.hypothesis.title} ({CAUSES[r.hypothesis.cause]}, ΔAIC {r.aic - s.aic:+.2g}"
+                + (f"; what would tell them apart: {told}" if told else "") + ")")
+
+    return (f"it is not singled out from " + " or from ".join(one(r) for r in s.rivals)
             + "; `geoback design --separate` ranks candidate instruments for it")
 
 
@@ -165,19 +167,39 @@ def cause_words(d) -> str:
 
 
 def rival_sentences(d) -> list[str]:
-    """A plain statement for every round whose accepted hypothesis has a rival within 2 AIC."""
+    """A plain statement for every rival of a round's accepted hypothesis (a refit within EQUAL_AIC, or of
+    another family within the evidence of check 3), in words graded by the AIC difference (divided by the
+    overdispersion check 3 allows for): within EQUAL_AIC the two fit about equally well; beyond it one fits
+    better, but not by the RIVAL_AIC units that single a cause out."""
     out = []
     for rnd in d.rounds:
-        if rnd.accepted is None or rnd.rival is None:
+        a = rnd.accepted
+        if a is None:
             continue
-        a, b = rnd.accepted, rnd.rival
-        wa, wb = rnd.weights.get(a.hypothesis.key, float("nan")), rnd.weights.get(b.hypothesis.key, float("nan"))
-        sep = rnd.separation.text(a.hypothesis.title, b.hypothesis.title) if rnd.separation is not None else ""
-        out.append(f"{_cap(a.hypothesis.title)} ({CAUSES[a.hypothesis.cause]}) and {b.hypothesis.title} "
-                   f"({CAUSES[b.hypothesis.cause]}) fit about equally well (Akaike weights {wa:.2f} / {wb:.2f}, "
-                   f"ΔAIC = {b.aic - a.aic:.2g}): the readings cannot tell them apart"
-                   + (f"; {sep}" if sep else "") + ".")
+        pairs = [(b, a.separations.get(b.hypothesis.key)) for b in a.rivals]
+        if rnd.rival is not None and rnd.rival not in a.rivals:
+            pairs.insert(0, (rnd.rival, rnd.separation))
+        c = overdispersion(a)
+        for b, sep in pairs:
+            first, second = (a, b) if b.aic >= a.aic else (b, a)
+            delta = second.aic - first.aic
+            numbers = (f"Akaike weights {rnd.weights.get(first.hypothesis.key, float('nan')):.2g} / "
+                       f"{rnd.weights.get(second.hypothesis.key, float('nan')):.2g}, ΔAIC = {delta:.2g}"
+                       + (f", {delta / c:.2g} divided by the χ²/dof {c:.3g} the refit leaves" if c > 1 else ""))
+            if delta / c < EQUAL_AIC:
+                text = (f"{_cap(_named(first))} and {_named(second)} fit about equally well ({numbers}): the "
+                        f"readings cannot tell them apart")
+            else:
+                text = (f"{_cap(_named(first))} fits better than {_named(second)} ({numbers}), but not by the "
+                        f"{RIVAL_AIC:.3g} AIC units that single a cause out: {second.hypothesis.title} keeps some "
+                        f"support, and the readings do not tell them apart with confidence")
+            told = sep.text(a.hypothesis.title, b.hypothesis.title) if sep is not None else ""
+            out.append(text + (f"; {told}" if told else "") + ".")
     return out
+
+
+def _named(s) -> str:
+    return f"{s.hypothesis.title} ({CAUSES[s.hypothesis.cause]})"
 
 
 def _cap(text: str) -> str:
@@ -317,8 +339,8 @@ def diagnosis_text(d) -> str:
             if acc.checks:
                 lines += ["", f"Claim checks ({GRADES[acc.grade] if acc.grade else 'not graded'}):"]
                 lines += [f"- {c.name}: {'passes' if c.passed else 'FAILS'} - {c.text}" for c in acc.checks.values()]
-            if rnd.rival is not None:
-                lines += ["", next((t for t in rival_sentences(_One(d, rnd))), "")]
+            for sentence in rival_sentences(_One(d, rnd)):
+                lines += ["", sentence]
         else:
             lines += ["", "No hypothesis is significant (likelihood-ratio test with Bonferroni correction)."]
             catch = detectable_text(rnd.ranking, rnd.threshold)
@@ -406,7 +428,7 @@ def before_after_lines(d) -> list[str]:
 
 
 class _One:
-    """A view of a diagnosis with a single round (for that round's rival sentence)."""
+    """A view of a diagnosis with a single round (for that round's rival sentences)."""
 
     def __init__(self, d, rnd):
         self.rounds = [rnd]
@@ -455,7 +477,9 @@ def _item(d, s, final: bool) -> dict:
         item["grade"] = GRADES.get(s.grade, s.grade)
         item["checks"] = {k: c.as_dict() for k, c in s.checks.items()}
         item["rivals"] = [{"key": r.hypothesis.key, "kind": r.hypothesis.kind, "title": r.hypothesis.title,
-                           "cause": CAUSES[r.hypothesis.cause], "dAIC": r.aic - s.aic} for r in s.rivals]
+                           "cause": CAUSES[r.hypothesis.cause], "dAIC": r.aic - s.aic,
+                           "separation": (s.separations[r.hypothesis.key].as_dict()
+                                          if r.hypothesis.key in s.separations else None)} for r in s.rivals]
         prof = d.depth_profile(s)
         if prof is not None:
             item["depth"] = prof.as_dict()
