@@ -919,6 +919,10 @@ def make_specs(args, seed: int) -> list[dict]:
     specs += [random_yielding_case(len(specs) + i, seed) for i in range(args.yielding)]
     if args.leave_out:
         specs = [{**sp, "leave_out": sorted(left_out(sp["kind"]))} for sp in specs if sp["kind"] not in NULL_KINDS]
+    if getattr(args, "logged", False):  # boreholes logged the strata to the tunnel's invert (concealed strata lie deeper)
+        for sp in specs:
+            g = sp["data"]["geometry"]
+            sp["data"]["ground"]["logged_to"] = round(g["axis_depth"] + g["radius"], 3)
     return [{**sp, "seed": seed} for sp in specs]
 
 
@@ -960,6 +964,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--leave-out", action="store_true",
                     help="leave-one-family-out: diagnose each concealed case (strong effects) with its truth's "
                          "family removed from the library; --concealed/--staged/--yielding count the cases")
+    ap.add_argument("--logged", action="store_true",
+                    help="every case states that boreholes logged its strata to the tunnel's invert (ground: "
+                         "logged_to): the same draws (every concealed stratum lies at least 2 m deeper), diagnosed "
+                         "with no stratum boundary proposed above it")
     args = ap.parse_args(argv)
     seeds = args.seeds or [args.seed]
     specs = [sp for seed in seeds for sp in make_specs(args, seed)]

@@ -227,3 +227,51 @@ def test_error_scales_example_names_the_instrument_and_refits_no_searched_bounda
               and not s.hypothesis.key.startswith(("yielding", "supported-release"))]
     assert scored and all(s.p_score >= first.threshold for s in scored)
     assert first.mismatches[0].instrument == "X1"
+
+
+def _logged(name: str, depth: float):
+    """A shipped concealed case whose boreholes log the strata to `depth` (ground: logged_to)."""
+    loaded = load_case(CONCEALED / f"{name}.yaml")
+    ground = loaded.case.ground.model_copy(update={"logged_to": depth})
+    return loaded.with_case(loaded.case.model_copy(update={"ground": ground}))
+
+
+def test_strata_logged_by_boreholes_keep_the_boundary_search_below_them():
+    """ground.logged_to = 12 m (the stiffer sand begins at 16 m): no boundary is proposed above 12 m,
+    the depth profile searches 12-40 m and still finds 16 m with its interval, and the report says
+    what was not tested and why. Logged to the model's bottom: no boundary is proposed at all."""
+    from geoback.diagnosis.hypotheses import candidate_hypotheses
+    from geoback.inference.identification import prepare
+    from geoback.reports.diagnosis_report import diagnosis_json, diagnosis_text
+
+    d = diagnose(_logged("layer-boundary", 12.0))
+    proposed = [z for r in d.rounds for s in r.ranking if s.hypothesis.kind == "layer-boundary"
+                for key, z in s.hypothesis.extra_values.items() if key.startswith("zsplit")]
+    assert proposed and min(proposed) > 12.0, proposed
+    s = d.accepted[0]
+    assert s.hypothesis.kind == "layer-boundary" and s.grade == "named"
+    prof = d.depth_profile(s)
+    assert prof.lo_limit == 12.0 and prof.low <= 16.0 <= prof.high and not prof.low_open
+    assert all(z >= 12.0 for z, _, _ in prof.points)
+    md = diagnosis_text(d)
+    assert ("Not tested: layer-boundary (a layer boundary with a different modulus below it): not above 12 m, the "
+            "depth the case's boreholes log the strata to (ground: logged_to); below it, tested.") in md
+    assert diagnosis_json(d)["not_tested"][-1]["kind"] == "layer-boundary"
+
+    a = prepare(_logged("layer-boundary", 40.0))
+    kinds = {h.kind for h in candidate_hypotheses(a.misfit, a.parameters.initial)}
+    assert "layer-boundary" not in kinds and "stiffness-gradient" in kinds, kinds
+
+
+def test_a_profile_reaching_the_logged_depth_says_so():
+    """An interval open at the shallow end of the search says which end it is: the layer's top, or the
+    depth the strata are logged to."""
+    from geoback.diagnosis.depth import profile_depth
+
+    def refit_at(z, near):  # J falls towards the shallow end: the interval is open there
+        return type("S", (), {"refit": type("F", (), {"J": 20 + 30 * max(0.0, z - 14.0), "p": np.array([z])})(),
+                              "reliability": None})()
+
+    prof = profile_depth("clay", refit_at, 12.0, 40.0, [13, 20, 30], tol=0.02,
+                         lo_words="the depth the strata are logged to")
+    assert prof.low_open and prof.interval_text().startswith("the depth the strata are logged to (12 m)")

@@ -252,6 +252,10 @@ class Ground(Strict):
     unit_weight: Positive = Field(description="unit weight gamma [kN/m3]; sigma_v = -gamma*depth")
     K0: Optional[Positive] = Field(None, description="K0 of all layers (unless a layer gives its own)")
     layers: list[Layer] = Field(min_length=1)
+    logged_to: Optional[NonNegativeLength] = Field(
+        None, description="depth the boreholes log the strata to [m] (or '25 m'): the layers above it are as "
+                          "logged, so `geoback diagnose` proposes no unmodelled stratum boundary above it "
+                          "(below it, and without it, it does)")
 
 
 class MeshSettings(Strict):

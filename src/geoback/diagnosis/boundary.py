@@ -10,7 +10,7 @@ from geoback.inference.estimate import Fit, Settings
 from geoback.inference.misfit import Misfit
 from geoback.diagnosis.depth import DepthProfile, profile_depth
 from geoback.diagnosis.refit import REFIT_ITERATIONS, compare, fit_and_assess, judge, lr_objective, null_start
-from geoback.diagnosis.hypotheses import Hypothesis
+from geoback.diagnosis.hypotheses import Hypothesis, unlogged_from
 from geoback.diagnosis.results import Round, Scored
 
 DEPTH_SEEDS = 7  # layer-boundary depths refitted evenly over a layer before bisection
@@ -103,14 +103,15 @@ def refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], set
     layer = group[0].hypothesis.key.split("[", 1)[1].split("@")[0]
     sim = current.simulation
     case = sim.loaded.case
-    lo_z, hi_z = _layer_range(case, layer)
+    top, hi_z = _layer_range(case, layer)
+    lo_z = unlogged_from(case, top)  # no boundary above the depth the boreholes log the strata to
     J0 = lr_objective(current, cur_fit)
     template = group[0]
 
     def refit_at(z: float, near: Scored | None) -> Scored:
         # the null start (the current optimum, the lower part at the layer's modulus there: the current
         # model on the split mesh) and a neighbouring depth's optimum; the fit starts from the lower
-        E_null = null_modulus(current, cur_fit.p, layer, z, lo_z)
+        E_null = null_modulus(current, cur_fit.p, layer, z, top)
         misfit = _split_layer_misfit(current, case, sim.loaded, layer, z, cur_fit.p, E_null)
         null = null_start(misfit)
         starts = [null] if near is None else [null, np.concatenate([near.refit.p[:-1], near.refit.p[-1:]])]
@@ -125,7 +126,8 @@ def refit_layer_boundary(current: Misfit, cur_fit: Fit, group: list[Scored], set
     key = f"zsplit[{layer}]"
     seeds = [t.hypothesis.extra_values[key] for t in group[:3]] + list(np.linspace(lo_z, hi_z, DEPTH_SEEDS + 2)[1:-1])
     prof = profile_depth(layer, refit_at, lo_z, hi_z, seeds, _depth_tolerance(lo_z, hi_z), say, interval=False,
-                         stop_above=None if rival_J is None else rival_J + LOSING)
+                         stop_above=None if rival_J is None else rival_J + LOSING,
+                         lo_words="the layer's top" if lo_z == top else "the depth the strata are logged to")
     if not prof.points:
         raise RuntimeError(f"no depth of a boundary in '{layer}' could be meshed and refitted")
     best = prof.best
@@ -148,7 +150,7 @@ def reprofile_boundary(s: Scored, misfit: Misfit, f: Fit, settings: Settings, me
     old = s.profile
     seeds = [old.z_hat, old.low, old.high]
     return profile_depth(layer, refit_at, old.lo_limit, old.hi_limit, seeds,
-                         _depth_tolerance(old.lo_limit, old.hi_limit), say)
+                         _depth_tolerance(old.lo_limit, old.hi_limit), say, lo_words=old.lo_words)
 
 
 def boundary_interval(rnd: Round, say) -> None:

@@ -40,8 +40,8 @@ class DepthProfile:
     interval. Built by ``profile_depth``; keeps what it needs to refit more depths."""
 
     layer: str
-    lo_limit: float  # the depths the boundary may take (the layer's top and bottom)
-    hi_limit: float
+    lo_limit: float  # the depths the boundary may take (the layer's top, or the depth the strata are logged to,
+    hi_limit: float  # and the layer's bottom)
     tol: float = 0.02
     points: list = field(default_factory=list)  # (z, J, Scored) sorted by z
     failed: list = field(default_factory=list)  # depths that could not be meshed or fitted
@@ -54,6 +54,7 @@ class DepthProfile:
     seconds: float = 0.0
     refit_at: Callable | None = field(default=None, repr=False)
     say: Callable = field(default=lambda msg: None, repr=False)
+    lo_words: str = "the layer's top"  # what lo_limit is, in words
 
     # ------------------------------------------------------------------ results
     @property
@@ -72,7 +73,7 @@ class DepthProfile:
     def interval_text(self) -> str:
         if not self.has_interval:
             return "not computed"
-        lo = f"{self.low:.3g} m" if not self.low_open else f"the layer's top ({self.low:.3g} m)"
+        lo = f"{self.low:.3g} m" if not self.low_open else f"{self.lo_words} ({self.low:.3g} m)"
         hi = f"{self.high:.3g} m" if not self.high_open else f"the layer's bottom ({self.high:.3g} m)"
         return f"{lo} to {hi}"
 
@@ -259,12 +260,14 @@ class DepthProfile:
 
 
 def profile_depth(layer: str, refit_at: Callable, lo: float, hi: float, seeds, tol: float,
-                  say=lambda msg: None, interval: bool = True, stop_above: float | None = None) -> DepthProfile:
+                  say=lambda msg: None, interval: bool = True, stop_above: float | None = None,
+                  lo_words: str = "the layer's top") -> DepthProfile:
     """Profile J over the boundary depth in (lo, hi). refit_at(z, start) returns a refitted Scored
     (its ``refit.J`` the profile value) or raises where the depth cannot be meshed; `start` is the
     Scored of the nearest depth already refitted (for a warm start) or None. interval: also find the
-    95 % interval (else later, ``prof.interval()``); stop_above: only the seeds if none is below it."""
-    prof = DepthProfile(layer, float(lo), float(hi), float(tol), refit_at=refit_at, say=say)
+    95 % interval (else later, ``prof.interval()``); stop_above: only the seeds if none is below it;
+    lo_words: what lo is, in words (the interval's words when it reaches it)."""
+    prof = DepthProfile(layer, float(lo), float(hi), float(tol), refit_at=refit_at, say=say, lo_words=lo_words)
     prof.search(seeds, stop_above)
     if interval:
         prof.interval()

@@ -104,14 +104,22 @@ def _anisotropy(ctx: Context) -> list[Hypothesis]:
         [_param(f"n[{name}]", 1.0, 0.2, 5.0)]) for name, *_ in _layers(ctx) if f"n[{name}]" not in ctx.baseline]
 
 
+def unlogged_from(case, top: float) -> float:
+    """The shallowest depth of a layer (whose top is `top`) where a stratum boundary the model lacks may be:
+    its top, or the depth the case's boreholes log the strata to (``ground.logged_to``) if deeper."""
+    logged = case.ground.logged_to
+    return float(top if logged is None else max(top, logged))
+
+
 def _layer_boundary(ctx: Context) -> list[Hypothesis]:
-    """Candidate boundary depths: within the layer, away from its edges, a grid of ~R/2 (a group:
-    the depths of one layer are alternatives, refined by ``boundary.py``)."""
+    """Candidate boundary depths: within the layer, away from its edges and below the depth the
+    case's boreholes log the strata to, a grid of ~R/2 (a group: the depths of one layer are
+    alternatives, refined by ``boundary.py``)."""
     out = []
     size = tunnel_size(ctx.case)
     step = max(0.5, size / 2 if not hasattr(ctx.case.geometry, "openings") else round(2 * size) / 4)  # whole 0.5 m
     for name, E, _, top, bottom in _layers(ctx):
-        for z in np.arange(top + step, bottom - step / 2, step):
+        for z in np.arange(unlogged_from(ctx.case, top) + step, bottom - step / 2, step):
             out.append(Hypothesis(
                 f"layer-boundary[{name}@{z:g}]", "layer-boundary", f"a stiffer or softer stratum below {z:g} m in '{name}'",
                 f"Below {z:g} m depth the ground of '{name}' has another modulus (an unmodelled layer boundary).",
@@ -383,11 +391,18 @@ def cause_of(kind: str) -> str:
 def not_applicable(case) -> list[tuple[str, str]]:
     """(kind, why) of every row of the catalogue that cannot apply to this case's model, said in the
     diagnosis instead of tested."""
+    out = []
     c = case.construction
     if not hasattr(case.geometry, "openings") and c is not None and c.lining is not None:
-        return [("yielding", "a lining on yielding ground is modelled for sections with openings only: the "
-                             "circular tunnel's lined case is not refitted with yielding ground")]
-    return []
+        out.append(("yielding", "a lining on yielding ground is modelled for sections with openings only: the "
+                                "circular tunnel's lined case is not refitted with yielding ground"))
+    logged = case.ground.logged_to
+    if logged:
+        below = ("below it, tested" if logged < case.geometry.depth else
+                 "the boreholes reach the model's bottom, so nowhere")
+        out.append(("layer-boundary", f"not above {logged:g} m, the depth the case's boreholes log the strata to "
+                                      f"(ground: logged_to); {below}"))
+    return out
 
 
 def candidate_hypotheses(misfit, p_hat: np.ndarray) -> list[Hypothesis]:
