@@ -7,6 +7,12 @@ Delta_i = AIC_i - min AIC, over the refitted hypotheses and the model without an
 the weight of evidence that model i is the best of the set. Two models within 2 AIC (weights
 within a factor e of each other) are "about equally" supported.
 
+A new reading's accuracy: read where two fitted models predict values d apart, a reading x = m_a + sigma e
+(e standard normal) changes J_b - J_a by (d^2 + 2 d sigma e) / sigma^2, which reaches the margin M that
+singles a cause out (claims.RIVAL_AIC) with probability P when d / sigma >= z + sqrt(z^2 + M), z =
+Phi^-1(P): the sigma such a reading needs (the models as fitted; refitting their other parameters can
+take up part of d).
+
 Detectable size: under an alternative with the extension at theta, the score statistic is
 non-central chi^2(k, lambda), lambda = ||M2 theta||^2 (M2: the part of the whitened sensitivity the
 baseline parameters cannot mimic). The size detected with probability POWER at the round's level
@@ -15,16 +21,27 @@ is sqrt(lambda*) / ||M2_j||, lambda* solving P(chi^2(k, lambda*) > chi^2_k(1 - l
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from statistics import NormalDist
 
 import numpy as np
 
 from geoback.case.covariance import NotPositiveDefinite
+from geoback.diagnosis.claims import RIVAL_AIC
 from geoback.inference.misfit import whiten_block
 from geoback.units import size_text
 
 EQUAL_AIC = 2.0  # within this many AIC units two hypotheses explain the readings about equally
 POWER = 0.8
+SEPARATE_POWER = 0.9  # the probability with which a new reading of the accuracy asked for separates two causes
+
+
+def sigma_to_separate(difference: float, margin: float = RIVAL_AIC, power: float = SEPARATE_POWER) -> float:
+    """The standard deviation a new reading needs to put two fitted models `margin` AIC apart by itself with
+    probability `power`, read where their predictions differ by `difference` (module docstring)."""
+    z = NormalDist().inv_cdf(power)
+    return abs(difference) / (z + math.sqrt(z * z + margin))
 
 
 def akaike_weights(aics: dict[str, float]) -> dict[str, float]:
@@ -66,7 +83,9 @@ class Separation:
         if self.new_points:
             p = self.new_points[0]
             parts.append(f"a new reading of {p['component']} at x = {p['x']:.3g} m, depth {p['depth']:.3g} m would "
-                         f"differ by {abs(p['difference']) * 1e3:.2g} mm between them")
+                         f"differ by {abs(p['difference']) * 1e3:.2g} mm between them (read with σ ≤ "
+                         f"{p['sigma_needed'] * 1e3:.2g} mm it would by itself set them {RIVAL_AIC:g} AIC apart with "
+                         f"{100 * SEPARATE_POWER:.0f} % probability)")
         return "; ".join(parts)
 
 
@@ -120,7 +139,7 @@ def _new_points(a, b, top: int = 3) -> list[dict]:
     for c, comp in enumerate(("ux", "uy")):
         for i in np.argsort(-np.abs(diff[:, c]))[:top]:
             found.append({"x": float(pts[i, 0]), "depth": float(-pts[i, 1]), "component": comp,
-                          "difference": float(diff[i, c])})
+                          "difference": float(diff[i, c]), "sigma_needed": sigma_to_separate(diff[i, c])})
     found.sort(key=lambda r: -abs(r["difference"]))
     return found[:top]
 
