@@ -7,8 +7,10 @@ by ``compare.separation`` for its closest rival: "a new reading of uy at x = 0 m
 by 4.9 mm between them"; the same in diagnosis.json). This study takes such
 tied cases of the accuracy benchmark (``benchmarks/diagnosis_accuracy.py``: a random tunnel, instrument
 layout and concealed effect, readings from the truth on a mesh twice as fine with noise), adds that one
-reading - a point reading the component named, with the case's extensometer's sigma, read from the same
-truth with noise - and diagnoses the case again. Printed per case: the truth, the tie, the reading
+reading - a point reading the component named, with the case's extensometer's sigma (``--sigma asked``: the
+sigma the verdict asks for, with which the reading alone would set the two 10 AIC apart with 90 %
+probability, where that is smaller, but not below MIN_SIGMA), read from the same truth with noise - and
+diagnoses the case again. Printed per case: the truth, the tie, the reading
 added, the verdict after; and how many ties the one reading turned into the right cause named, into a
 wrong cause named, or left tied. With --leave-out the rows are those of a leave-one-family-out run, each
 case diagnosed again without its true family: there the two tied causes are both wrong, and the reading
@@ -40,6 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common as C  # noqa: E402
 
 NAME = "separating_reading"
+MIN_SIGMA = 5e-5  # m: the most accurate point reading asked of a site (a borehole extensometer's anchor, 0.05 mm)
 
 
 def tied_rows(path: Path, leave_out: bool = False) -> list[dict]:
@@ -59,17 +62,20 @@ def _verdict(bench, spec: dict, folder: str):
     return problem, bench._diagnose(problem, frozenset(spec.get("leave_out") or ()))
 
 
-def with_reading(spec: dict, point: dict) -> dict:
-    """The case with one point reading added where the two models differ most (the extensometer's sigma)."""
+def with_reading(spec: dict, point: dict, asked: bool = False) -> dict:
+    """The case with one point reading added where the two models differ most: the extensometer's sigma, or
+    with `asked` the sigma the verdict asks for where that is smaller (not below MIN_SIGMA)."""
     spec = copy.deepcopy(spec)
     ins = spec["data"]["instruments"]
     sigma = next(i["sigma"] for i in ins if i["kind"] == "extensometer")
+    if asked:
+        sigma = max(min(sigma, point["sigma_needed"]), MIN_SIGMA)
     ins.append({"name": "N1", "kind": "points", "points": [[round(point["x"], 3), -round(point["depth"], 3)]],
                 "components": [point["component"]], "sigma": sigma})
     return spec
 
 
-def study(rows: list[dict], counts: dict, leave_out: bool = False) -> list[dict]:
+def study(rows: list[dict], counts: dict, leave_out: bool = False, asked: bool = False) -> list[dict]:
     bench = C.script("benchmarks/diagnosis_accuracy.py")
     out = []
     with tempfile.TemporaryDirectory() as folder:
@@ -86,14 +92,14 @@ def study(rows: list[dict], counts: dict, leave_out: bool = False) -> list[dict]
             if first is None or not first.rivals or first.grade != "explained":
                 out.append({**_ids(r), "outcome": "not tied when drawn again"})
                 continue
-            rnd = next(rd for rd in d.rounds if rd.accepted is first)  # the reading its verdict asks for
-            sep = rnd.separation if rnd.rival in first.rivals else None
+            rival = first.rivals[0]  # the closest rival: the reading its verdict asks for to tell them apart
+            sep = first.separations.get(rival.hypothesis.key)
             if sep is None or not sep.new_points:
                 out.append({**_ids(r), "outcome": "no point suggested"})
                 continue
             point = sep.new_points[0]
             try:
-                _, after = _verdict(bench, with_reading(spec, point), folder)
+                _, after = _verdict(bench, with_reading(spec, point, asked), folder)
             except Exception as exc:  # noqa: BLE001
                 out.append({**_ids(r), "outcome": f"error: {exc}"})
                 continue
@@ -103,12 +109,14 @@ def study(rows: list[dict], counts: dict, leave_out: bool = False) -> list[dict]
             outcome = ("named right" if kind == r["kind"] and grade == "named" else
                        "named wrong" if grade == "named" else "still tied" if a and a.rivals else
                        "nothing accepted" if a is None else f"{kind} {grade}")
-            row = {**_ids(r), "rival": rnd.rival.hypothesis.kind, "component": point["component"],
+            row = {**_ids(r), "rival": rival.hypothesis.kind, "component": point["component"],
                    "x": point["x"], "depth": point["depth"], "difference_mm": 1e3 * point["difference"],
+                   "sigma_mm": 1e3 * with_reading(spec, point, asked)["data"]["instruments"][-1]["sigma"],
                    "after": kind, "grade_after": grade, "outcome": outcome}
             out.append(row)
             print(f"{r['seed']} {r['case']:<32} tie with {row['rival']:<22} + {point['component']} at x = "
-                  f"{point['x']:.3g} m, depth {point['depth']:.3g} m ({row['difference_mm']:+.2g} mm): "
+                  f"{point['x']:.3g} m, depth {point['depth']:.3g} m ({row['difference_mm']:+.2g} mm, σ "
+                  f"{row['sigma_mm']:.2g} mm): "
                   f"{kind} {grade} -> {outcome}", flush=True)
     return out
 
@@ -126,11 +134,14 @@ def main(argv: list[str] | None = None) -> list[dict]:
     ap.add_argument("--max", type=int, default=None, help="at most this many tied cases")
     ap.add_argument("--leave-out", action="store_true", help="rows of a --leave-out run: each case diagnosed without "
                     "its true family, so that any cause named after the reading is a confident wrong one")
+    ap.add_argument("--sigma", choices=("extensometer", "asked"), default="extensometer",
+                    help="the new reading's sigma: the case's extensometer's, or the one the verdict asks for where "
+                         "smaller (not below 0.05 mm)")
     ap.add_argument("--out", type=Path, default=C.OUT)
     a = ap.parse_args(argv)
     rows = [r for path in a.csv for r in tied_rows(path, a.leave_out)][:a.max]
     counts = {"concealed": a.concealed, "null": 0, "staged": a.staged, "yielding": a.yielding}
-    out = study(rows, counts, a.leave_out)
+    out = study(rows, counts, a.leave_out, a.sigma == "asked")
     a.out.mkdir(parents=True, exist_ok=True)
     keys = sorted({k for r in out for k in r}, key=lambda k: list(out[0]).index(k) if k in out[0] else 99)
     with open(a.out / f"{NAME}.csv", "w", newline="", encoding="utf-8") as fh:

@@ -267,6 +267,10 @@ def test_the_tied_cases_and_the_reading_added(tmp_path):
     assert spec["data"]["instruments"] == [{"name": "X1", "kind": "extensometer", "sigma": 0.00021}]  # not changed
     assert added["data"]["instruments"][-1] == {"name": "N1", "kind": "points", "points": [[2.823, -11.105]],
                                                 "components": ["ux"], "sigma": 0.00021}
+    # --sigma asked: the sigma the verdict asks for where smaller, never below 0.05 mm
+    for needed, sigma in ((0.0009, 0.00021), (0.00012, 0.00012), (0.00001, study.MIN_SIGMA)):
+        point = {"x": 2.8234, "depth": 11.1049, "component": "ux", "difference": 0.0044, "sigma_needed": needed}
+        assert study.with_reading(spec, point, asked=True)["data"]["instruments"][-1]["sigma"] == sigma
 
 
 @pytest.mark.slow  # 15 s: one benchmark case diagnosed twice

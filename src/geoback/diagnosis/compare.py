@@ -84,8 +84,9 @@ class Separation:
             p = self.new_points[0]
             parts.append(f"a new reading of {p['component']} at x = {p['x']:.3g} m, depth {p['depth']:.3g} m would "
                          f"differ by {abs(p['difference']) * 1e3:.2g} mm between them (read with σ ≤ "
-                         f"{p['sigma_needed'] * 1e3:.2g} mm it would by itself set them {RIVAL_AIC:g} AIC apart with "
-                         f"{100 * SEPARATE_POWER:.0f} % probability)")
+                         f"{p['sigma_needed'] * 1e3:.2g} mm it would set the two, as fitted now, {RIVAL_AIC:g} AIC "
+                         f"apart with {100 * SEPARATE_POWER:.0f} % probability; refitted to it, they may take up "
+                         f"part of the difference)")
         return "; ".join(parts)
 
 
