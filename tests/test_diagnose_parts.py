@@ -160,7 +160,7 @@ def test_every_rival_within_the_evidence_is_stated_in_words_its_aic_difference_b
     assert "uy at x = 0 m, depth 15.4 m would differ by 6.1 mm between them (read with σ ≤ 1.3 mm it would set " \
            "the two, as fitted now, 10 AIC apart with 90 % probability; refitted to it, they may take up part of " \
            "the difference)" in second and "about equally" not in second
-    words = _rival_words(None, acc)
+    words = _rival_words(acc)
     assert words.index("a different stratum") < words.index("ux at x = 9 m") < words.index("K0 varying") < words.index(
         "uy at x = 0 m"), words
     # overdispersed: 9.1 AIC over chi^2/dof 5 is 1.8, within 2: about equally well, and the scaling said

@@ -68,7 +68,7 @@ def _check_words(s) -> str:
     return "; ".join(c.text for c in s.checks.values() if not c.passed and c.name != "rivals")  # rivals: own words
 
 
-def _rival_words(d, s) -> str:
+def _rival_words(s) -> str:
     """The rivals of other families of an accepted cause, each with what would tell it from the cause."""
     if not s.rivals:
         return ""
@@ -79,7 +79,7 @@ def _rival_words(d, s) -> str:
         return (f"{r.hypothesis.title} ({CAUSES[r.hypothesis.cause]}, ΔAIC {r.aic - s.aic:+.2g}"
                 + (f"; what would tell them apart: {told}" if told else "") + ")")
 
-    return (f"it is not singled out from " + " or from ".join(one(r) for r in s.rivals)
+    return ("it is not singled out from " + " or from ".join(one(r) for r in s.rivals)
             + "; `geoback design --separate` ranks candidate instruments for it")
 
 
@@ -131,7 +131,7 @@ def _accepted_words(d, s) -> str:
     if same is not None:
         text += f" - {interface_sentence(same)}"
     if s.grade == "explained":
-        why = "; ".join(w for w in (_check_words(s), _rival_words(d, s)) if w)
+        why = "; ".join(w for w in (_check_words(s), _rival_words(s)) if w)
         text = f"{title} - EXPLAINED BUT NOT SINGLED OUT ({why}): {est}"
     if strength is not None and s.grade != "explained":
         text += f"; {strength.words()}"
