@@ -295,6 +295,13 @@ def test_simulate_plots(tmp_path):
     out = subprocess.run(GEOBACK + ["simulate", str(CASES / "tunnel-paper.yaml"), "--no-vtu", "--out",
                                     str(tmp_path / "b")], capture_output=True, text=True, timeout=300)
     assert not (tmp_path / "b" / "predicted.png").exists()  # drawn on request only
+    # --no-plots (a loop of forward runs): no figure at all, the plastic zone's CSV still written
+    out = subprocess.run(GEOBACK + ["simulate", str(CASES / "plastic-tunnel.yaml"), "--no-vtu", "--no-plots", "--out",
+                                    str(tmp_path / "c")], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    written = sorted(p.name for p in (tmp_path / "c").iterdir() if not p.name.startswith("."))  # (the set's manifest)
+    assert written == ["plastic_zone.csv", "predicted.csv", "predicted.json"]
+    assert len((tmp_path / "c" / "plastic_zone.csv").read_text().splitlines()) > 10
 
 
 # --------------------------------------------------------------------------- the objective map's cost

@@ -238,8 +238,11 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
              seed: int = typer.Option(0, help="seed of the noise"),
              readings_out: Optional[str] = typer.Option(None, help="write study data: readings as a CSV usable as "
                                                         "readings_file (a finer mesh than the case's by default)"),
-             plots: bool = typer.Option(False, "--plots", help="also draw the predicted readings along every "
-                                        "instrument (predicted.png and .svg)"),
+             plots: Optional[bool] = typer.Option(None, "--plots/--no-plots", help="--plots: also draw the predicted "
+                                                  "readings along every instrument (predicted.png and .svg); "
+                                                  "--no-plots: draw no figure at all (not the lining, walls or "
+                                                  "plastic-zone figures either: their CSV files are written; for "
+                                                  "a loop of forward runs)"),
              as_json: bool = _json_option(),
              allow_large: bool = _allow_large(),
              time_limit: Optional[str] = _time_limit_option()):
@@ -248,7 +251,7 @@ def simulate(case: Path = typer.Argument(..., help="case file (YAML)"),
         _simulate(case, out, vtu, set_, refine, noise, seed, readings_out, as_json, allow_large, plots)
 
 
-def _simulate(case, out, vtu, set_, refine, noise, seed, readings_out, as_json, allow_large, plots=False):
+def _simulate(case, out, vtu, set_, refine, noise, seed, readings_out, as_json, allow_large, plots=None):
     if seed < 0:
         raise GeobackError(f"--seed: expected a whole number 0 or above, found {seed}")
     out = _check_out(out)

@@ -32,10 +32,12 @@ def forward(analysis: Analysis, values: Mapping | None = None) -> np.ndarray:
     return analysis.simulation.predict(values if values is not None else analysis.values).x
 
 
-def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: bool = True, plots: bool = False,
-             values_text: str = "") -> dict:
-    """Predicted readings (CSV, JSON) and optionally the field (VTU) and the predicted readings along
-    every instrument (predicted.png/.svg; `values_text`: the values set, in words) for the case's values."""
+def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: bool = True,
+             plots: bool | None = None, values_text: str = "") -> dict:
+    """Predicted readings (CSV, JSON) and optionally the field (VTU) for the case's values; the lining's,
+    the walls' and the plastic zone's figures unless `plots` is False, and with `plots` True also the
+    predicted readings along every instrument (predicted.png/.svg; `values_text`: the values set, in words)."""
+    figures = plots is not False
     from geoback.reports.report import write_field
 
     sim = analysis.simulation
@@ -73,15 +75,17 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
             write_field(sim.field(values), staging / "field.vtu", analysis.case)
         if forces is not None:  # thrust and moments around the lining: CSV, VTU, figure
             from geoback.reports.fields import write_lining
-            from geoback.reports.plots import save_figures
-            from geoback.reports.plots.lining import lining_figure
 
             write_lining(forces, staging, vtu=vtu)
-            fig = lining_figure(forces)
-            try:
-                save_figures({"lining": fig}, staging)
-            finally:
-                fig.clear()
+            if figures:
+                from geoback.reports.plots import save_figures
+                from geoback.reports.plots.lining import lining_figure
+
+                fig = lining_figure(forces)
+                try:
+                    save_figures({"lining": fig}, staging)
+                finally:
+                    fig.clear()
         if plots:  # the readings predicted along every instrument
             import matplotlib
 
@@ -97,15 +101,17 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
                 save_figures({"predicted": fig}, staging)
             finally:
                 fig.clear()
-        if walls is not None:  # walls.csv, supports.csv and their figures
+        if walls is not None:  # walls.csv, supports.csv
+            from geoback.reports.walls import write_walls
+
+            write_walls(walls, staging)
+        if walls is not None and figures:  # and their figures
             import matplotlib
 
             from geoback.reports.plots import save_figures
             from geoback.reports.plots.common import RC
             from geoback.reports.plots.walls import supports_figure, walls_figure
-            from geoback.reports.walls import write_walls
 
-            write_walls(walls, staging)
             with matplotlib.rc_context(RC):
                 figs = {k: f for k, f in (("walls", walls_figure(walls)), ("supports", supports_figure(walls)))
                         if f is not None}
@@ -116,15 +122,17 @@ def simulate(analysis: Analysis, out: Path, values: Mapping | None = None, vtu: 
                     f.clear()
         if zone is not None:  # the yielded ground: CSV and figure
             from geoback.reports.fields import write_plastic_zone
-            from geoback.reports.plots import save_figures
-            from geoback.reports.plots.plastic import plastic_zone_figure
 
             write_plastic_zone(zone, staging)
-            fig = plastic_zone_figure(zone, name=analysis.case.name, case=analysis.case)
-            try:
-                save_figures({"plastic_zone": fig}, staging)
-            finally:
-                fig.clear()
+            if figures:
+                from geoback.reports.plots import save_figures
+                from geoback.reports.plots.plastic import plastic_zone_figure
+
+                fig = plastic_zone_figure(zone, name=analysis.case.name, case=analysis.case)
+                try:
+                    save_figures({"plastic_zone": fig}, staging)
+                finally:
+                    fig.clear()
     return {"readings": x, "dofs": sim.dofs, "lining": forces, "plastic_zone": zone, "walls": walls}
 
 
