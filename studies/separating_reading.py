@@ -99,7 +99,8 @@ def study(rows: list[dict], counts: dict, leave_out: bool = False, asked: bool =
                 continue
             point = sep.new_points[0]
             try:
-                _, after = _verdict(bench, with_reading(spec, point, asked), folder)
+                read = with_reading(spec, point, asked)
+                _, after = _verdict(bench, read, folder)
             except Exception as exc:  # noqa: BLE001
                 out.append({**_ids(r), "outcome": f"error: {exc}"})
                 continue
@@ -111,7 +112,7 @@ def study(rows: list[dict], counts: dict, leave_out: bool = False, asked: bool =
                        "nothing accepted" if a is None else f"{kind} {grade}")
             row = {**_ids(r), "rival": rival.hypothesis.kind, "component": point["component"],
                    "x": point["x"], "depth": point["depth"], "difference_mm": 1e3 * point["difference"],
-                   "sigma_mm": 1e3 * with_reading(spec, point, asked)["data"]["instruments"][-1]["sigma"],
+                   "sigma_mm": 1e3 * read["data"]["instruments"][-1]["sigma"],
                    "after": kind, "grade_after": grade, "outcome": outcome}
             out.append(row)
             print(f"{r['seed']} {r['case']:<32} tie with {row['rival']:<22} + {point['component']} at x = "
